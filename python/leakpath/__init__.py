@@ -1,0 +1,30 @@
+"""leakpath: rough-surface contact mechanics and the percolating free volume.
+
+A rough elastic surface is pressed against a rigid flat; for every imposed approach leakpath
+reports the contact area, load, free volume, the part of the free volume that belongs to
+channels crossing the interface, and Nayak's spectral moments of the deformed surface.
+"""
+
+from ._core import __version__
+from ._core import kernel_table as _kernel_table
+from .moments import nayak_moments
+from .surfaces import Surface, load, rmd, spectral
+
+__all__ = [
+    "__version__",
+    "Surface",
+    "load",
+    "nayak_moments",
+    "rmd",
+    "spectral",
+    "kernel_table",
+]
+
+
+def kernel_table(shape: tuple[int, int], dx: float, e_star: float = 1.0):
+    """Love influence table ``K[|di|, |dj|]`` of shape ``shape`` (see :mod:`leakpath._core`).
+
+    ``K[0, 0] = 4·dx·ln(1 + √2)/(π E*)``; units: length / (pressure) per unit pressure.
+    """
+    ny, nx = shape
+    return _kernel_table(int(ny), int(nx), float(dx), float(e_star))

@@ -1,0 +1,51 @@
+//! Errors of the Rust core. The bindings map each kind to a Python exception.
+
+use std::fmt;
+
+#[derive(Debug, Clone, PartialEq)]
+pub enum Error {
+    /// An argument is out of its domain; `name` is the argument as the Python API spells it.
+    InvalidArgument { name: &'static str, message: String },
+    /// The problem would need more memory than allowed; `bytes` is the estimate.
+    TooLarge { bytes: u64, limit: u64, what: String },
+    /// An iterative method hit its iteration cap.
+    NotConverged { iterations: usize, residual: f64, what: String },
+    /// The caller asked to stop (Ctrl-C).
+    Interrupted,
+}
+
+impl Error {
+    pub fn invalid(name: &'static str, message: impl Into<String>) -> Self {
+        Error::InvalidArgument {
+            name,
+            message: message.into(),
+        }
+    }
+}
+
+impl fmt::Display for Error {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Error::InvalidArgument { name, message } => write!(f, "{name}: {message}"),
+            Error::TooLarge { bytes, limit, what } => write!(
+                f,
+                "{what} needs about {:.2} GiB, more than the {:.2} GiB allowed",
+                *bytes as f64 / (1u64 << 30) as f64,
+                *limit as f64 / (1u64 << 30) as f64
+            ),
+            Error::NotConverged {
+                iterations,
+                residual,
+                what,
+            } => write!(
+                f,
+                "{what} did not converge in {iterations} iterations (residual {residual:.3e})"
+            ),
+            Error::Interrupted => write!(f, "interrupted"),
+        }
+    }
+}
+
+impl std::error::Error for Error {}
+
+pub type Result<T> = std::result::Result<T, Error>;

@@ -1,0 +1,188 @@
+//! Influence coefficients of the elastic half-space (Love's rectangle solution).
+//!
+//! Element `(i, j)` is the `dx × dx` square centred on grid point `(i, j)` carrying a
+//! uniform pressure. The normal surface displacement at the centre of element `(k, l)`
+//! caused by unit pressure on element `(i, j)` depends only on `|k − i|` and `|l − j|`
+//! (Johnson, *Contact Mechanics*, eq. 3.25, with `a = b = dx/2`):
+//!
+//! ```text
+//! K(x, y) = 1/(π E*) Σ± f(x ± a, y ± b),   f(X, Y) = X asinh(Y/|X|) + Y asinh(X/|Y|)
+//! ```
+//!
+//! with signs `+ − − +` over the corners `(x+a, y+b), (x+a, y−b), (x−a, y+b), (x−a, y−b)`.
+//! The `asinh` form is Love's `ln(Y + √(X²+Y²))` form with the `ln|X|` terms, which cancel
+//! over the four corners, removed; it avoids the cancellation of the logarithmic form far
+//! from the element. `K(0, 0) = 4·dx·ln(1 + √2)/(π E*)` and `K → dx²/(π E* r)` far away.
+//!
+//! The kernel table `K[|di|, |dj|]` (ny × nx values) is all that is ever stored: any block
+//! `C_PP` of the `N × N` influence matrix is built from it on demand.
+
+use rayon::prelude::*;
+
+/// `X asinh(Y/|X|) + Y asinh(X/|Y|)`, with `0·asinh(·/0) = 0`.
+#[inline]
+fn corner(x: f64, y: f64) -> f64 {
+    let mut v = 0.0;
+    if x != 0.0 {
+        v += x * (y / x.abs()).asinh();
+    }
+    if y != 0.0 {
+        v += y * (x / y.abs()).asinh();
+    }
+    v
+}
+
+/// Displacement at offset `(x, y)` from the centre of a `dx × dx` element under unit pressure,
+/// for contact modulus `e_star`.
+#[inline]
+pub fn love_displacement(x: f64, y: f64, dx: f64, e_star: f64) -> f64 {
+    let a = 0.5 * dx;
+    let s = corner(x + a, y + a) - corner(x + a, y - a) - corner(x - a, y + a)
+        + corner(x - a, y - a);
+    s / (std::f64::consts::PI * e_star)
+}
+
+/// The kernel table `K[|di|, |dj|]`, row-major `ny × nx`: displacement at a centre `di` rows and
+/// `dj` columns away from a unit-pressure element.
+pub fn kernel_table(ny: usize, nx: usize, dx: f64, e_star: f64) -> Vec<f64> {
+    let mut k = vec![0.0; ny * nx];
+    k.par_chunks_mut(nx.max(1)).enumerate().for_each(|(i, row)| {
+        let y = i as f64 * dx;
+        for (j, v) in row.iter_mut().enumerate() {
+            // The table is symmetric in (x, y) ↔ (y, x); evaluating with x along axis 1 keeps
+            // the orientation explicit.
+            *v = love_displacement(j as f64 * dx, y, dx, e_star);
+        }
+    });
+    k
+}
+
+/// The kernel table with a given shape and element size.
+#[derive(Clone, Debug)]
+pub struct Kernel {
+    pub ny: usize,
+    pub nx: usize,
+    pub dx: f64,
+    pub e_star: f64,
+    pub table: Vec<f64>,
+}
+
+impl Kernel {
+    pub fn new(ny: usize, nx: usize, dx: f64, e_star: f64) -> Self {
+        Kernel {
+            ny,
+            nx,
+            dx,
+            e_star,
+            table: kernel_table(ny, nx, dx, e_star),
+        }
+    }
+
+    /// Influence coefficient between flat indices `a` and `b` of the `ny × nx` grid.
+    #[inline]
+    pub fn coeff(&self, a: usize, b: usize) -> f64 {
+        let (ia, ja) = (a / self.nx, a % self.nx);
+        let (ib, jb) = (b / self.nx, b % self.nx);
+        self.table[ia.abs_diff(ib) * self.nx + ja.abs_diff(jb)]
+    }
+
+    /// The dense block `C_PP` for the flat indices `idx`, column-major `k × k`.
+    pub fn block(&self, idx: &[usize]) -> Vec<f64> {
+        let k = idx.len();
+        let mut out = vec![0.0; k * k];
+        out.par_chunks_mut(k.max(1)).enumerate().for_each(|(c, col)| {
+            let b = idx[c];
+            for (r, v) in col.iter_mut().enumerate() {
+                *v = self.coeff(idx[r], b);
+            }
+        });
+        out
+    }
+
+    /// The block `C_{rows, cols}`, column-major `rows.len() × cols.len()`.
+    pub fn cross_block(&self, rows: &[usize], cols: &[usize]) -> Vec<f64> {
+        let m = rows.len();
+        let mut out = vec![0.0; m * cols.len()];
+        out.par_chunks_mut(m.max(1)).enumerate().for_each(|(c, col)| {
+            let b = cols[c];
+            for (r, v) in col.iter_mut().enumerate() {
+                *v = self.coeff(rows[r], b);
+            }
+        });
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::f64::consts::PI;
+
+    #[test]
+    fn self_coefficient_is_closed_form() {
+        for &(dx, e) in &[(1.0, 1.0), (0.01, 2.5), (3.7e-6, 210e9)] {
+            let k = kernel_table(4, 4, dx, e);
+            let exact = 4.0 * dx * (1.0 + 2f64.sqrt()).ln() / (PI * e);
+            assert!(((k[0] - exact) / exact).abs() < 1e-14, "{} vs {}", k[0], exact);
+        }
+    }
+
+    #[test]
+    fn far_field_is_point_load() {
+        let (dx, e) = (0.5, 3.0);
+        let k = kernel_table(64, 64, dx, e);
+        // r = 50 dx along an axis, along the diagonal-ish direction (30, 40).
+        for &(i, j) in &[(0usize, 50usize), (50, 0), (30, 40), (40, 30)] {
+            let r = ((i * i + j * j) as f64).sqrt() * dx;
+            let point = dx * dx / (PI * e * r);
+            let rel = (k[i * 64 + j] - point).abs() / point;
+            assert!(rel < 1e-3, "({i},{j}): rel {rel}");
+        }
+    }
+
+    #[test]
+    fn table_is_symmetric_and_decreasing() {
+        let k = kernel_table(20, 20, 1.0, 1.0);
+        for i in 0..20 {
+            for j in 0..20 {
+                assert!((k[i * 20 + j] - k[j * 20 + i]).abs() <= 1e-15 * k[0]);
+                if j + 1 < 20 {
+                    assert!(k[i * 20 + j + 1] < k[i * 20 + j]);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn block_is_symmetric() {
+        let ker = Kernel::new(7, 9, 1.0, 1.0);
+        let idx = [0usize, 5, 17, 40, 62];
+        let b = ker.block(&idx);
+        for r in 0..5 {
+            for c in 0..5 {
+                assert_eq!(b[r + 5 * c], b[c + 5 * r]);
+            }
+            assert_eq!(b[r + 5 * r], ker.table[0]);
+        }
+    }
+
+    #[test]
+    fn rectangular_centre_value_matches_quadrature() {
+        // Independent check: integrate the point-load Green's function 1/(π E* r) over a
+        // distant element by a fine midpoint rule.
+        let (dx, e) = (1.0, 1.0);
+        let (x0, y0) = (3.0, 2.0);
+        let n = 400;
+        let h = dx / n as f64;
+        let mut s = 0.0;
+        for a in 0..n {
+            for b in 0..n {
+                let x = -0.5 * dx + (a as f64 + 0.5) * h;
+                let y = -0.5 * dx + (b as f64 + 0.5) * h;
+                s += h * h / (PI * e * ((x0 - x).powi(2) + (y0 - y).powi(2)).sqrt());
+            }
+        }
+        let v = love_displacement(x0, y0, dx, e);
+        assert!(((v - s) / s).abs() < 1e-6, "{v} vs {s}");
+    }
+}
