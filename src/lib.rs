@@ -5,6 +5,7 @@
 
 pub mod error;
 pub mod influence;
+pub mod operator;
 
 mod python;
 

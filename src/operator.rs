@@ -1,0 +1,368 @@
+//! The influence operator `u = C p` on a whole field, by FFT convolution.
+//!
+//! * Free boundary: the Love kernel table is laid out as an even, zero-padded circulant on a
+//!   `Py × Px` grid with `P ≥ 2n − 1` per axis (so the circular convolution equals the linear
+//!   one on the `ny × nx` patch), `P` the smallest 2,3,5-smooth size: `2n` for `n = 2^m + 1`
+//!   factors badly.
+//! * Periodic: the half-space stiffness in Fourier space, `û_q = 2 p̂_q / (E* |q|)` for
+//!   `q ≠ 0`, `û_0 = 0` (u has zero mean), `q = 2π·(k/L)` rad/length — the convention of Tamaas
+//!   and of ContactMechanics' `PeriodicFFTElasticHalfSpace` with zero q = 0 stiffness.
+//!
+//! The 2-D real transform is done as real-to-complex FFTs along rows, then complex FFTs along
+//! columns. The column pass is fused — gather a block of columns, forward FFT, multiply by the
+//! kernel spectrum, inverse FFT, scatter — so only `ny` rows of the half spectrum are ever
+//! stored and the padded rows are never touched. Every stage runs on rayon; each output value
+//! is computed by the same sequence of operations whatever the thread count.
+
+use std::sync::Arc;
+
+use rayon::prelude::*;
+use realfft::{ComplexToReal, RealFftPlanner, RealToComplex};
+use rustfft::num_complex::Complex64;
+use rustfft::{Fft, FftPlanner};
+
+use crate::error::{Error, Result};
+use crate::influence::Kernel;
+
+/// Columns handled per rayon task in the fused column pass.
+const COLUMN_BLOCK: usize = 8;
+
+/// Smallest 2,3,5-smooth integer `≥ n`.
+pub fn smooth_size(n: usize) -> usize {
+    let mut m = n.max(1);
+    loop {
+        let mut r = m;
+        for p in [2, 3, 5] {
+            while r % p == 0 {
+                r /= p;
+            }
+        }
+        if r == 1 {
+            return m;
+        }
+        m += 1;
+    }
+}
+
+/// Boundary condition of the elastic problem.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Boundary {
+    Free,
+    Periodic,
+}
+
+/// `u = C p` by FFT for an `ny × nx` grid.
+pub struct Operator {
+    pub ny: usize,
+    pub nx: usize,
+    pub boundary: Boundary,
+    /// Transform sizes (`py = ny`, `px = nx` when periodic).
+    pub py: usize,
+    pub px: usize,
+    /// Half-spectrum width `px/2 + 1`.
+    pxh: usize,
+    /// Real kernel spectrum, column-major over the half spectrum: `spec[c * py + r]`, already
+    /// divided by `py·px` (the inverse transforms are unnormalised).
+    spec: Vec<f64>,
+    r2c: Arc<dyn RealToComplex<f64>>,
+    c2r: Arc<dyn ComplexToReal<f64>>,
+    col_fwd: Arc<dyn Fft<f64>>,
+    col_inv: Arc<dyn Fft<f64>>,
+}
+
+impl Operator {
+    /// Bytes held by an operator for an `ny × nx` grid, and the transient peak of building it.
+    pub fn memory_estimate(ny: usize, nx: usize, boundary: Boundary) -> u64 {
+        let (py, px) = padded(ny, nx, boundary);
+        let pxh = px / 2 + 1;
+        let spec = (py * pxh * 8) as u64;
+        // Building the free kernel spectrum needs the padded kernel's half spectrum.
+        let build = match boundary {
+            Boundary::Free => (py * pxh * 16) as u64,
+            Boundary::Periodic => 0,
+        };
+        // One apply: the ny × pxh half spectrum.
+        let apply = (ny * pxh * 16) as u64;
+        spec + build.max(apply)
+    }
+
+    /// The free-boundary operator for a Love kernel table.
+    pub fn free(kernel: &Kernel) -> Self {
+        let (ny, nx) = (kernel.ny, kernel.nx);
+        let (py, px) = padded(ny, nx, Boundary::Free);
+        let mut op = Self::plan(ny, nx, py, px, Boundary::Free);
+        // Even circulant layout of K on the padded grid.
+        let mut padded_kernel = vec![0.0; py * px];
+        padded_kernel
+            .par_chunks_mut(px)
+            .enumerate()
+            .for_each(|(r, row)| {
+                let di = if r < ny {
+                    Some(r)
+                } else if r > py - ny {
+                    Some(py - r)
+                } else {
+                    None
+                };
+                if let Some(di) = di {
+                    let krow = &kernel.table[di * nx..(di + 1) * nx];
+                    row[..nx].copy_from_slice(krow);
+                    for dj in 1..nx {
+                        row[px - dj] = krow[dj];
+                    }
+                }
+            });
+        op.spec = op.full_spectrum(padded_kernel);
+        op
+    }
+
+    /// The periodic operator: `û_q = 2 p̂_q / (E* |q|)`, `û_0 = 0`.
+    pub fn periodic(ny: usize, nx: usize, dx: f64, e_star: f64) -> Self {
+        let mut op = Self::plan(ny, nx, ny, nx, Boundary::Periodic);
+        let norm = 1.0 / (ny * nx) as f64;
+        let two_pi = 2.0 * std::f64::consts::PI;
+        let (ly, lx) = (ny as f64 * dx, nx as f64 * dx);
+        let pxh = op.pxh;
+        let mut spec = vec![0.0; pxh * ny];
+        spec.par_chunks_mut(ny).enumerate().for_each(|(c, col)| {
+            let qx = two_pi * c as f64 / lx;
+            for (r, v) in col.iter_mut().enumerate() {
+                let kr = if r <= ny / 2 {
+                    r as f64
+                } else {
+                    r as f64 - ny as f64
+                };
+                let qy = two_pi * kr / ly;
+                let q = (qx * qx + qy * qy).sqrt();
+                *v = if q > 0.0 { 2.0 / (e_star * q) * norm } else { 0.0 };
+            }
+        });
+        op.spec = spec;
+        op
+    }
+
+    fn plan(ny: usize, nx: usize, py: usize, px: usize, boundary: Boundary) -> Self {
+        let mut rp = RealFftPlanner::<f64>::new();
+        let mut cp = FftPlanner::<f64>::new();
+        Operator {
+            ny,
+            nx,
+            boundary,
+            py,
+            px,
+            pxh: px / 2 + 1,
+            spec: Vec::new(),
+            r2c: rp.plan_fft_forward(px),
+            c2r: rp.plan_fft_inverse(px),
+            col_fwd: cp.plan_fft_forward(py),
+            col_inv: cp.plan_fft_inverse(py),
+        }
+    }
+
+    /// Real part of the 2-D FFT of a real even `py × px` field, column-major over the half
+    /// spectrum and divided by `py·px`.
+    fn full_spectrum(&self, mut field: Vec<f64>) -> Vec<f64> {
+        let (py, px, pxh) = (self.py, self.px, self.pxh);
+        let mut half = vec![Complex64::new(0.0, 0.0); py * pxh];
+        half.par_chunks_mut(pxh)
+            .zip(field.par_chunks_mut(px))
+            .for_each_init(
+                || self.r2c.make_scratch_vec(),
+                |scratch, (out, inp)| {
+                    self.r2c
+                        .process_with_scratch(inp, out, scratch)
+                        .expect("row FFT lengths are fixed by the plan");
+                },
+            );
+        drop(field);
+        let norm = 1.0 / (py * px) as f64;
+        let mut spec = vec![0.0; pxh * py];
+        spec.par_chunks_mut(py).enumerate().for_each_init(
+            || {
+                (
+                    vec![Complex64::new(0.0, 0.0); py],
+                    vec![Complex64::new(0.0, 0.0); self.col_fwd.get_inplace_scratch_len()],
+                )
+            },
+            |(buf, scratch), (c, col)| {
+                for r in 0..py {
+                    buf[r] = half[r * pxh + c];
+                }
+                self.col_fwd.process_with_scratch(buf, scratch);
+                for r in 0..py {
+                    col[r] = buf[r].re * norm;
+                }
+            },
+        );
+        spec
+    }
+
+    /// `u = C p` for row-major `ny × nx` fields.
+    pub fn apply(&self, p: &[f64], u: &mut [f64]) {
+        let (ny, nx, py, px, pxh) = (self.ny, self.nx, self.py, self.px, self.pxh);
+        assert_eq!(p.len(), ny * nx);
+        assert_eq!(u.len(), ny * nx);
+        let zero = Complex64::new(0.0, 0.0);
+        // Rows: real-to-complex on the zero-padded row.
+        let mut half = vec![zero; ny * pxh];
+        half.par_chunks_mut(pxh).enumerate().for_each_init(
+            || (vec![0.0; px], self.r2c.make_scratch_vec()),
+            |(row, scratch), (i, out)| {
+                row[..nx].copy_from_slice(&p[i * nx..(i + 1) * nx]);
+                row[nx..].fill(0.0);
+                self.r2c
+                    .process_with_scratch(row, out, scratch)
+                    .expect("row FFT lengths are fixed by the plan");
+            },
+        );
+        // Columns: fused forward FFT, multiply, inverse FFT, on blocks of columns. Each task
+        // owns a disjoint set of columns of `half`; the raw pointer hands that out without a
+        // transpose.
+        let n_blocks = pxh.div_ceil(COLUMN_BLOCK);
+        let half_ptr = SyncPtr(half.as_mut_ptr());
+        (0..n_blocks).into_par_iter().for_each_init(
+            || {
+                let s = self
+                    .col_fwd
+                    .get_inplace_scratch_len()
+                    .max(self.col_inv.get_inplace_scratch_len());
+                (vec![zero; py * COLUMN_BLOCK], vec![zero; s])
+            },
+            |(buf, scratch), b| {
+                let c0 = b * COLUMN_BLOCK;
+                let c1 = (c0 + COLUMN_BLOCK).min(pxh);
+                let w = c1 - c0;
+                let hp = half_ptr;
+                for (t, c) in (c0..c1).enumerate() {
+                    let col = &mut buf[t * py..(t + 1) * py];
+                    for r in 0..ny {
+                        // SAFETY: column c belongs to this task only; r < ny rows exist.
+                        col[r] = unsafe { *hp.0.add(r * pxh + c) };
+                    }
+                    col[ny..].fill(zero);
+                }
+                self.col_fwd.process_with_scratch(&mut buf[..w * py], scratch);
+                for (t, c) in (c0..c1).enumerate() {
+                    let k = &self.spec[c * py..(c + 1) * py];
+                    for (v, &s) in buf[t * py..(t + 1) * py].iter_mut().zip(k) {
+                        *v *= s;
+                    }
+                }
+                self.col_inv.process_with_scratch(&mut buf[..w * py], scratch);
+                for (t, c) in (c0..c1).enumerate() {
+                    for r in 0..ny {
+                        // SAFETY: as above.
+                        unsafe { *hp.0.add(r * pxh + c) = buf[t * py + r] };
+                    }
+                }
+            },
+        );
+        // Rows: complex-to-real, keep the first nx values.
+        u.par_chunks_mut(nx).zip(half.par_chunks_mut(pxh)).for_each_init(
+            || (vec![0.0; px], self.c2r.make_scratch_vec()),
+            |(row, scratch), (out, inp)| {
+                // The DC and Nyquist terms of a real signal are real; drop round-off there.
+                inp[0].im = 0.0;
+                if px % 2 == 0 {
+                    inp[pxh - 1].im = 0.0;
+                }
+                self.c2r
+                    .process_with_scratch(inp, row, scratch)
+                    .expect("row FFT lengths are fixed by the plan");
+                out.copy_from_slice(&row[..nx]);
+            },
+        );
+    }
+}
+
+#[derive(Clone, Copy)]
+struct SyncPtr(*mut Complex64);
+// SAFETY: used only to hand disjoint columns of one buffer to rayon tasks.
+unsafe impl Send for SyncPtr {}
+unsafe impl Sync for SyncPtr {}
+
+/// Transform sizes for a grid.
+pub fn padded(ny: usize, nx: usize, boundary: Boundary) -> (usize, usize) {
+    match boundary {
+        Boundary::Free => (smooth_size(2 * ny - 1), smooth_size(2 * nx - 1)),
+        Boundary::Periodic => (ny, nx),
+    }
+}
+
+/// Validate a grid shape for the operators.
+pub fn check_shape(ny: usize, nx: usize) -> Result<()> {
+    if ny == 0 || nx == 0 {
+        return Err(Error::invalid("heights", "the grid must have at least one point"));
+    }
+    Ok(())
+}
+
+/// Dense reference product `u = C p` from the kernel table (O(N²); tests only).
+pub fn dense_apply(kernel: &Kernel, p: &[f64]) -> Vec<f64> {
+    let n = kernel.ny * kernel.nx;
+    (0..n)
+        .into_par_iter()
+        .map(|a| (0..n).map(|b| kernel.coeff(a, b) * p[b]).sum())
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn lcg(seed: u64, n: usize) -> Vec<f64> {
+        let mut s = seed;
+        (0..n)
+            .map(|_| {
+                s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                (s >> 11) as f64 / (1u64 << 53) as f64
+            })
+            .collect()
+    }
+
+    #[test]
+    fn smooth_sizes() {
+        assert_eq!(smooth_size(257), 270);
+        assert_eq!(smooth_size(8193), 8640);
+        assert_eq!(smooth_size(1), 1);
+        assert_eq!(smooth_size(7), 8);
+    }
+
+    #[test]
+    fn free_operator_equals_dense_product() {
+        for &(ny, nx) in &[(9usize, 9usize), (8, 8), (7, 12), (13, 5), (1, 6)] {
+            let ker = Kernel::new(ny, nx, 0.3, 2.0);
+            let op = Operator::free(&ker);
+            let p = lcg((ny * 100 + nx) as u64, ny * nx);
+            let mut u = vec![0.0; ny * nx];
+            op.apply(&p, &mut u);
+            let d = dense_apply(&ker, &p);
+            let scale = d.iter().fold(0.0f64, |a, &v| a.max(v.abs()));
+            for (a, b) in u.iter().zip(&d) {
+                assert!((a - b).abs() <= 1e-12 * scale, "{ny}x{nx}: {a} vs {b}");
+            }
+        }
+    }
+
+    #[test]
+    fn periodic_operator_of_a_cosine() {
+        // p = cos(2π k x / L) along axis 1 → u = 2 p / (E* q).
+        let (ny, nx, dx, e) = (6usize, 16usize, 0.25, 1.7);
+        let op = Operator::periodic(ny, nx, dx, e);
+        let k = 3.0;
+        let lx = nx as f64 * dx;
+        let q = 2.0 * std::f64::consts::PI * k / lx;
+        let p: Vec<f64> = (0..ny * nx)
+            .map(|i| (q * (i % nx) as f64 * dx).cos())
+            .collect();
+        let mut u = vec![0.0; ny * nx];
+        op.apply(&p, &mut u);
+        for (a, b) in u.iter().zip(&p) {
+            assert!((a - 2.0 * b / (e * q)).abs() < 1e-12);
+        }
+        // A uniform pressure gives zero displacement (u has zero mean).
+        let mut u0 = vec![1.0; ny * nx];
+        op.apply(&vec![1.0; ny * nx], &mut u0);
+        assert!(u0.iter().all(|v| v.abs() < 1e-14));
+    }
+}
