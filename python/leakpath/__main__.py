@@ -1,0 +1,8 @@
+"""``python -m leakpath``: the same as the ``leakpath`` console script."""
+
+import sys
+
+from .cli import main
+
+if __name__ == "__main__":
+    sys.exit(main())
