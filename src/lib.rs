@@ -3,9 +3,12 @@
 //!
 //! Pure Rust; the PyO3 bindings live in `python.rs` only.
 
+pub mod clusters;
 pub mod error;
 pub mod influence;
+pub mod nnls;
 pub mod operator;
+pub mod pk;
 
 mod python;
 

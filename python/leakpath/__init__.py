@@ -7,11 +7,18 @@ channels crossing the interface, and Nayak's spectral moments of the deformed su
 
 from ._core import __version__
 from ._core import kernel_table as _kernel_table
-from .moments import nayak_moments
+from .contact import ContactProblem, ContactState, solve
+from .moments import Moments, nayak_moments, rms_height, rms_slope
 from .surfaces import Surface, load, rmd, spectral
 
 __all__ = [
     "__version__",
+    "ContactProblem",
+    "ContactState",
+    "Moments",
+    "rms_height",
+    "rms_slope",
+    "solve",
     "Surface",
     "load",
     "nayak_moments",
