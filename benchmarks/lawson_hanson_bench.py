@@ -132,7 +132,7 @@ def main() -> None:
     lines += [
         "## The paper's sweep: RMD m = 7 (129²), D = 2.1, seed 0, Δ = k·h_s/20, k = 1…20",
         "",
-        "| solver | warm_start | total time of 20 solves (median) | runs | contact fraction at Δ = h_s |",
+        "| solver | warm_start | 20 solves, total (median) | runs | contact fraction at Δ = h_s |",
         "|---|---|---|---|---|",
     ]
     for solver in solvers:
@@ -150,7 +150,8 @@ def main() -> None:
         "",
         "## leakpath's Lawson–Hanson vs scipy.optimize.nnls (same problems, RMD D = 2.1)",
         "",
-        "| grid | Δ/h_s | scipy nnls | leakpath lawson-hanson | speed-up | max rel. diff | contact fraction |",
+        "| grid | Δ/h_s | scipy nnls | leakpath lawson-hanson | speed-up | max rel. diff"
+        " | contact fraction |",
         "|---|---|---|---|---|---|---|",
     ]
     for m in (5, 6):
@@ -158,7 +159,8 @@ def main() -> None:
         for r in res["rows"]:
             row = (
                 f"| {res['grid']} | {r['approach/h_s']} | {r['scipy_s'] * 1e3:.1f} ms |"
-                f" {r['leakpath_lh_s'] * 1e3:.2f} ms | {r['ratio']:.0f}× | {r['max_rel_diff']:.1e} |"
+                f" {r['leakpath_lh_s'] * 1e3:.2f} ms | {r['ratio']:.0f}×"
+                f" | {r['max_rel_diff']:.1e} |"
                 f" {r['contact_fraction']:.3f} |"
             )
             print(row, flush=True)

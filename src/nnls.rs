@@ -122,7 +122,9 @@ impl Factor {
         l.par_chunks_mut(grown)
             .take(old_k)
             .enumerate()
-            .for_each(|(i, row)| row[..=i].copy_from_slice(&self.l[i * old_cap..i * old_cap + i + 1]));
+            .for_each(|(i, row)| {
+                row[..=i].copy_from_slice(&self.l[i * old_cap..i * old_cap + i + 1])
+            });
         self.l = l;
         self.cap = grown;
         Ok(())
@@ -151,11 +153,13 @@ impl Factor {
             solve_lower_triangular_in_place(self.lower(k), rm, Par::rayon(0));
         }
         let mut s = Mat::<f64>::zeros(nb, nb);
-        s.par_col_chunks_mut(1).enumerate().for_each(|(b, mut col)| {
-            for a in 0..nb {
-                col[(a, 0)] = kernel.coeff(new[a], new[b]);
-            }
-        });
+        s.par_col_chunks_mut(1)
+            .enumerate()
+            .for_each(|(b, mut col)| {
+                for a in 0..nb {
+                    col[(a, 0)] = kernel.coeff(new[a], new[b]);
+                }
+            });
         if k > 0 {
             let rr = MatRef::from_column_major_slice(&r, k, nb);
             matmul(
@@ -301,7 +305,10 @@ impl Factor {
                 }
             }
         } else {
-            let again: Vec<usize> = (first..k).filter(|&t| keep[t]).map(|t| self.idx[t]).collect();
+            let again: Vec<usize> = (first..k)
+                .filter(|&t| keep[t])
+                .map(|t| self.idx[t])
+                .collect();
             self.truncate(first);
             self.append(kernel, &again, k_bound)?;
         }
@@ -391,7 +398,9 @@ pub fn kkt_certificate(p: &[f64], g: &[f64], h_range: f64) -> f64 {
 pub fn height_stats(h: &[f64]) -> (f64, f64) {
     let (lo, hi) = h
         .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &v| (lo.min(v), hi.max(v)));
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &v| {
+            (lo.min(v), hi.max(v))
+        });
     (hi, hi - lo)
 }
 
@@ -425,7 +434,10 @@ impl<'a> LawsonHanson<'a> {
         let n = self.h.len();
         let (hmax, hs) = height_stats(self.h);
         if !(approach.is_finite() && approach >= 0.0) {
-            return Err(Error::invalid("approach", format!("must be ≥ 0, got {approach}")));
+            return Err(Error::invalid(
+                "approach",
+                format!("must be ≥ 0, got {approach}"),
+            ));
         }
         let b: Vec<f64> = self.h.iter().map(|&hi| approach - (hmax - hi)).collect();
         let scale = if hs > 0.0 { hs } else { 1.0 };

@@ -229,7 +229,9 @@ class ContactProblem:
         limit = self.max_approach
         if a > limit * (1 + 1e-12) + 1e-300:
             what = (
-                "full contact (max h − mean h)" if self.boundary == "periodic" else "h_s = max h − min h"
+                "full contact (max h − mean h)"
+                if self.boundary == "periodic"
+                else "h_s = max h − min h"
             )
             raise ValueError(
                 f"approach: {a:.6g} exceeds {what} = {limit:.6g}; "
