@@ -7,9 +7,17 @@ pub enum Error {
     /// An argument is out of its domain; `name` is the argument as the Python API spells it.
     InvalidArgument { name: &'static str, message: String },
     /// The problem would need more memory than allowed; `bytes` is the estimate.
-    TooLarge { bytes: u64, limit: u64, what: String },
+    TooLarge {
+        bytes: u64,
+        limit: u64,
+        what: String,
+    },
     /// An iterative method hit its iteration cap.
-    NotConverged { iterations: usize, residual: f64, what: String },
+    NotConverged {
+        iterations: usize,
+        residual: f64,
+        what: String,
+    },
     /// The caller asked to stop (Ctrl-C).
     Interrupted,
 }

@@ -37,8 +37,8 @@ fn corner(x: f64, y: f64) -> f64 {
 #[inline]
 pub fn love_displacement(x: f64, y: f64, dx: f64, e_star: f64) -> f64 {
     let a = 0.5 * dx;
-    let s = corner(x + a, y + a) - corner(x + a, y - a) - corner(x - a, y + a)
-        + corner(x - a, y - a);
+    let s =
+        corner(x + a, y + a) - corner(x + a, y - a) - corner(x - a, y + a) + corner(x - a, y - a);
     s / (std::f64::consts::PI * e_star)
 }
 
@@ -46,14 +46,16 @@ pub fn love_displacement(x: f64, y: f64, dx: f64, e_star: f64) -> f64 {
 /// `dj` columns away from a unit-pressure element.
 pub fn kernel_table(ny: usize, nx: usize, dx: f64, e_star: f64) -> Vec<f64> {
     let mut k = vec![0.0; ny * nx];
-    k.par_chunks_mut(nx.max(1)).enumerate().for_each(|(i, row)| {
-        let y = i as f64 * dx;
-        for (j, v) in row.iter_mut().enumerate() {
-            // The table is symmetric in (x, y) ↔ (y, x); evaluating with x along axis 1 keeps
-            // the orientation explicit.
-            *v = love_displacement(j as f64 * dx, y, dx, e_star);
-        }
-    });
+    k.par_chunks_mut(nx.max(1))
+        .enumerate()
+        .for_each(|(i, row)| {
+            let y = i as f64 * dx;
+            for (j, v) in row.iter_mut().enumerate() {
+                // The table is symmetric in (x, y) ↔ (y, x); evaluating with x along axis 1 keeps
+                // the orientation explicit.
+                *v = love_displacement(j as f64 * dx, y, dx, e_star);
+            }
+        });
     k
 }
 
@@ -78,6 +80,20 @@ impl Kernel {
         }
     }
 
+    /// A kernel from a given table, e.g. the periodic one: the first column of the circulant
+    /// influence matrix (the response to unit pressure on element (0, 0)). The circulant is
+    /// even, `t[ny − d] = t[d]`, so `coeff` indexes it with `|di|, |dj|` like Love's table.
+    pub fn from_table(ny: usize, nx: usize, dx: f64, e_star: f64, table: Vec<f64>) -> Self {
+        assert_eq!(table.len(), ny * nx);
+        Kernel {
+            ny,
+            nx,
+            dx,
+            e_star,
+            table,
+        }
+    }
+
     /// Influence coefficient between flat indices `a` and `b` of the `ny × nx` grid.
     #[inline]
     pub fn coeff(&self, a: usize, b: usize) -> f64 {
@@ -90,12 +106,14 @@ impl Kernel {
     pub fn block(&self, idx: &[usize]) -> Vec<f64> {
         let k = idx.len();
         let mut out = vec![0.0; k * k];
-        out.par_chunks_mut(k.max(1)).enumerate().for_each(|(c, col)| {
-            let b = idx[c];
-            for (r, v) in col.iter_mut().enumerate() {
-                *v = self.coeff(idx[r], b);
-            }
-        });
+        out.par_chunks_mut(k.max(1))
+            .enumerate()
+            .for_each(|(c, col)| {
+                let b = idx[c];
+                for (r, v) in col.iter_mut().enumerate() {
+                    *v = self.coeff(idx[r], b);
+                }
+            });
         out
     }
 
@@ -103,12 +121,14 @@ impl Kernel {
     pub fn cross_block(&self, rows: &[usize], cols: &[usize]) -> Vec<f64> {
         let m = rows.len();
         let mut out = vec![0.0; m * cols.len()];
-        out.par_chunks_mut(m.max(1)).enumerate().for_each(|(c, col)| {
-            let b = cols[c];
-            for (r, v) in col.iter_mut().enumerate() {
-                *v = self.coeff(rows[r], b);
-            }
-        });
+        out.par_chunks_mut(m.max(1))
+            .enumerate()
+            .for_each(|(c, col)| {
+                let b = cols[c];
+                for (r, v) in col.iter_mut().enumerate() {
+                    *v = self.coeff(rows[r], b);
+                }
+            });
         out
     }
 }
@@ -123,7 +143,12 @@ mod tests {
         for &(dx, e) in &[(1.0, 1.0), (0.01, 2.5), (3.7e-6, 210e9)] {
             let k = kernel_table(4, 4, dx, e);
             let exact = 4.0 * dx * (1.0 + 2f64.sqrt()).ln() / (PI * e);
-            assert!(((k[0] - exact) / exact).abs() < 1e-14, "{} vs {}", k[0], exact);
+            assert!(
+                ((k[0] - exact) / exact).abs() < 1e-14,
+                "{} vs {}",
+                k[0],
+                exact
+            );
         }
     }
 

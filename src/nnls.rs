@@ -550,10 +550,13 @@ impl<'a> LawsonHanson<'a> {
                     }
                     // A lone Lawson–Hanson candidate that cannot carry load: its
                     // interpenetration is at round-off; skip it until p changes.
+                    // Finish the minimisation on the old set (earlier steps of this inner
+                    // loop may have moved p) before looking for violators again.
                     skip[new[0]] = true;
                     skipped.push(new[0]);
                     self.factor.truncate(new_start);
-                    break;
+                    new.clear();
+                    continue;
                 }
                 // Old points: step back to the feasible boundary if some z ≤ 0.
                 let mut alpha = 1.0f64;
@@ -567,7 +570,9 @@ impl<'a> LawsonHanson<'a> {
                         }
                     }
                 }
-                progressed = true;
+                if !new.is_empty() || blocking.is_some() {
+                    progressed = true;
+                }
                 let Some(blocking) = blocking else {
                     for (&i, &zv) in self.factor.idx.iter().zip(&z) {
                         p[i] = zv;
@@ -586,8 +591,9 @@ impl<'a> LawsonHanson<'a> {
                     }
                 }
                 self.factor.retain(self.kernel, &keep, k_bound)?;
-                // Removals keep the order, so the surviving new points stay at the tail.
-                new.retain(|&i| self.factor.contains(i));
+                // After a step the new points carry positive pressure: from here on they are
+                // ordinary members of P, handled by the step-back rule.
+                new.clear();
                 iterations += 1;
                 if iterations > opts.max_iter {
                     return Err(Error::NotConverged {

@@ -134,7 +134,11 @@ impl Operator {
                 };
                 let qy = two_pi * kr / ly;
                 let q = (qx * qx + qy * qy).sqrt();
-                *v = if q > 0.0 { 2.0 / (e_star * q) * norm } else { 0.0 };
+                *v = if q > 0.0 {
+                    2.0 / (e_star * q) * norm
+                } else {
+                    0.0
+                };
             }
         });
         op.spec = spec;
@@ -241,14 +245,16 @@ impl Operator {
                     }
                     col[ny..].fill(zero);
                 }
-                self.col_fwd.process_with_scratch(&mut buf[..w * py], scratch);
+                self.col_fwd
+                    .process_with_scratch(&mut buf[..w * py], scratch);
                 for (t, c) in (c0..c1).enumerate() {
                     let k = &self.spec[c * py..(c + 1) * py];
                     for (v, &s) in buf[t * py..(t + 1) * py].iter_mut().zip(k) {
                         *v *= s;
                     }
                 }
-                self.col_inv.process_with_scratch(&mut buf[..w * py], scratch);
+                self.col_inv
+                    .process_with_scratch(&mut buf[..w * py], scratch);
                 for (t, c) in (c0..c1).enumerate() {
                     for r in 0..ny {
                         // SAFETY: as above.
@@ -258,20 +264,22 @@ impl Operator {
             },
         );
         // Rows: complex-to-real, keep the first nx values.
-        u.par_chunks_mut(nx).zip(half.par_chunks_mut(pxh)).for_each_init(
-            || (vec![0.0; px], self.c2r.make_scratch_vec()),
-            |(row, scratch), (out, inp)| {
-                // The DC and Nyquist terms of a real signal are real; drop round-off there.
-                inp[0].im = 0.0;
-                if px % 2 == 0 {
-                    inp[pxh - 1].im = 0.0;
-                }
-                self.c2r
-                    .process_with_scratch(inp, row, scratch)
-                    .expect("row FFT lengths are fixed by the plan");
-                out.copy_from_slice(&row[..nx]);
-            },
-        );
+        u.par_chunks_mut(nx)
+            .zip(half.par_chunks_mut(pxh))
+            .for_each_init(
+                || (vec![0.0; px], self.c2r.make_scratch_vec()),
+                |(row, scratch), (out, inp)| {
+                    // The DC and Nyquist terms of a real signal are real; drop round-off there.
+                    inp[0].im = 0.0;
+                    if px % 2 == 0 {
+                        inp[pxh - 1].im = 0.0;
+                    }
+                    self.c2r
+                        .process_with_scratch(inp, row, scratch)
+                        .expect("row FFT lengths are fixed by the plan");
+                    out.copy_from_slice(&row[..nx]);
+                },
+            );
     }
 }
 
@@ -292,7 +300,10 @@ pub fn padded(ny: usize, nx: usize, boundary: Boundary) -> (usize, usize) {
 /// Validate a grid shape for the operators.
 pub fn check_shape(ny: usize, nx: usize) -> Result<()> {
     if ny == 0 || nx == 0 {
-        return Err(Error::invalid("heights", "the grid must have at least one point"));
+        return Err(Error::invalid(
+            "heights",
+            "the grid must have at least one point",
+        ));
     }
     Ok(())
 }
@@ -314,7 +325,9 @@ mod tests {
         let mut s = seed;
         (0..n)
             .map(|_| {
-                s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                s = s
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
                 (s >> 11) as f64 / (1u64 << 53) as f64
             })
             .collect()
