@@ -253,7 +253,11 @@ class ContactProblem:
         ``solver``: ``"lawson-hanson"`` (the paper: one point enters the contact set per
         iteration), ``"active-set"`` (Lawson–Hanson with blocks of points entering at once:
         the same unique minimiser, far fewer factor updates), ``"polonsky-keer"``
-        (matrix-free conjugate gradients), ``"auto"`` (active-set).
+        (matrix-free conjugate gradients), ``"auto"``: Polonsky–Keer to find the contact set,
+        then an exact Lawson–Hanson finish from that set when its Cholesky factor fits in
+        half the memory limit (the result's ``solver`` reads
+        ``"polonsky-keer+active-set"``), else the Polonsky–Keer answer alone. With
+        ``warm_start=True`` it continues from the previous solve's factor instead.
 
         ``warm_start``: ``None``/``False`` start from ``p = 0`` (the paper); ``True`` from the
         contact set of this problem's previous solve; a :class:`ContactState` or a boolean
@@ -266,7 +270,7 @@ class ContactProblem:
         if not (np.isfinite(tol) and tol > 0):
             raise ValueError(f"tol: must be a positive number, got {tol!r}")
         if solver == "auto":
-            solver = "active-set"
+            return self._solve_auto(a, warm_start, tol, max_iter)
         if solver == "polonsky-keer":
             return self._solve_pk(a, warm_start, tol, max_iter)
         start, contact_set = self._start(warm_start)
@@ -281,6 +285,28 @@ class ContactProblem:
         state = self._state(out, solver)
         self._last = state
         return state
+
+    def _solve_auto(
+        self, a: float, warm_start: Any, tol: float, max_iter: int | None
+    ) -> ContactState:
+        if warm_start is True and self._last is not None and self._core.n_passive > 0:
+            return self.solve(a, solver="active-set", warm_start=True, tol=tol, max_iter=max_iter)
+        if a == 0.0:
+            return self.solve(a, solver="active-set", tol=tol, max_iter=max_iter)
+        rough = self._solve_pk(a, warm_start, max(tol, 1e-9), max_iter)
+        k = int(np.count_nonzero(rough.contact))
+        full = k == rough.n_points
+        # Worst case of the growing factor: 1.5 × k rows, squared, 8 bytes each.
+        factor_bytes = 8 * (1.5 * k) ** 2
+        if full or factor_bytes > 0.5 * self.memory_limit:
+            return rough
+        exact = self.solve(
+            a, solver="active-set", warm_start=rough.contact, tol=tol, max_iter=max_iter
+        )
+        exact.solver = "polonsky-keer+active-set"
+        exact.iterations += rough.iterations
+        exact.seconds += rough.seconds
+        return exact
 
     def _start(self, warm_start: Any) -> tuple[str, np.ndarray | None]:
         if warm_start is None or warm_start is False:

@@ -38,7 +38,7 @@ column                 definition                                               
 ``m0 m2 m4 alpha``     Nayak's moments of the deformed surface ``s = h − u``             L², 1,
                        (:func:`leakpath.moments.nayak_moments`, finite differences)      L⁻², 1
 ``m0_star`` …          each divided by its value for the undeformed surface
-``solver``             the exact solver that ran (``"auto"`` resolves to ``active-set``)
+``solver``             the solver that ran (``"auto"``: ``polonsky-keer+active-set``)
 ``iterations``         solver iterations (summed over restarts)
 ``kkt_restarts``       exact re-solves from the returned contact set needed to reach the
                        KKT acceptance threshold :data:`KKT_ACCEPT` (normally 0)
@@ -800,8 +800,8 @@ def sweep(
         Explicit approaches [length]: strictly increasing, ``≥ 0``, ``≤`` the largest
         approach (:attr:`ContactProblem.max_approach`).
     solver : str
-        ``"auto"`` (the fast exact active-set solver), ``"active-set"``, ``"lawson-hanson"``
-        (the paper's one-point-per-iteration algorithm) or ``"polonsky-keer"``.
+        ``"auto"`` (Polonsky–Keer, then an exact active-set finish), ``"active-set"``,
+        ``"lawson-hanson"`` (the paper's one-point-per-iteration algorithm) or ``"polonsky-keer"``.
     warm_start : bool
         Start level ``k`` from the contact mask of level ``k − 1`` (default) or from ``p = 0``.
     axis : 0, 1, "either" or "both"
@@ -844,7 +844,7 @@ def sweep(
     connectivity = _check_connectivity(connectivity)
     problem = ContactProblem(surface, E=E, nu=nu, boundary=boundary)  # type: ignore[arg-type]
     approach_list = _resolve_approaches(problem, n_levels, approaches)
-    run_solver = "active-set" if solver == "auto" else solver
+    run_solver = solver
     t_total = time.perf_counter()
 
     parameters: dict[str, Any] = {
