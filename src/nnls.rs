@@ -651,9 +651,9 @@ mod tests {
             let mut change = 0.0f64;
             for i in 0..n {
                 let mut r = b[i];
-                for j in 0..n {
+                for (j, &pj) in p.iter().enumerate() {
                     if j != i {
-                        r -= kernel.coeff(i, j) * p[j];
+                        r -= kernel.coeff(i, j) * pj;
                     }
                 }
                 let v = (r / kernel.coeff(i, i)).max(0.0);

@@ -38,7 +38,10 @@ fn kernel_table<'py>(
     e_star: f64,
 ) -> PyResult<Bound<'py, PyArray2<f64>>> {
     if ny == 0 || nx == 0 {
-        return Err(to_py(Error::invalid("shape", "ny and nx must be at least 1")));
+        return Err(to_py(Error::invalid(
+            "shape",
+            "ny and nx must be at least 1",
+        )));
     }
     check_positive("dx", dx)?;
     check_positive("e_star", e_star)?;
@@ -47,10 +50,632 @@ fn kernel_table<'py>(
     arr.reshape([ny, nx])
 }
 
+// ---- clusters ----
+// Connected components of the free region and their percolation classes (core: clusters.rs).
+// Kept in a private module so that its imports cannot clash with the rest of this file.
+mod clusters_py {
+    use std::borrow::Cow;
+    use std::sync::{Arc, Mutex};
+
+    use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray2, PyUntypedArrayMethods};
+    use pyo3::exceptions::PyRuntimeError;
+    use pyo3::prelude::*;
+    use pyo3::types::PyDict;
+
+    use super::to_py;
+    use crate::clusters::{self, Connectivity, ContactMask, Flow, FreeMask, Periodic, PositiveGap};
+    use crate::error::Error;
+
+    /// Row-major cells of a 2-D array, copied only when the array is not C-contiguous.
+    /// (`as_slice` also accepts Fortran order, whose memory order is column-major.)
+    fn row_major<'a, T: numpy::Element + Copy>(a: &'a PyReadonlyArray2<'_, T>) -> Cow<'a, [T]> {
+        match a.as_slice() {
+            Ok(s) if a.is_c_contiguous() => Cow::Borrowed(s),
+            _ => Cow::Owned(a.as_array().iter().copied().collect()),
+        }
+    }
+
+    fn check_threads(threads: Option<i64>) -> PyResult<Option<usize>> {
+        match threads {
+            None => Ok(None),
+            Some(t) if t >= 1 => Ok(Some(t as usize)),
+            Some(t) => Err(to_py(Error::invalid(
+                "threads",
+                format!("must be at least 1 (or None for all cores), got {t}"),
+            ))),
+        }
+    }
+
+    /// Runs `f` on a pool of `threads` threads, or on rayon's global pool. Pools of up to
+    /// `MAX_KEPT` threads are kept for later calls: starting threads per call would cost more
+    /// than labelling a small grid, and their per-thread buffers would be lost each time.
+    fn in_pool<T: Send>(threads: Option<usize>, f: impl FnOnce() -> T + Send) -> PyResult<T> {
+        const MAX_KEPT: usize = 64;
+        static POOLS: Mutex<Vec<(usize, Arc<rayon::ThreadPool>)>> = Mutex::new(Vec::new());
+        let Some(n) = threads else {
+            return Ok(f());
+        };
+        let build = || {
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(n)
+                .build()
+                .map(Arc::new)
+                .map_err(|e| PyRuntimeError::new_err(format!("cannot start {n} threads: {e}")))
+        };
+        let pool = if n <= MAX_KEPT {
+            // A panic elsewhere cannot leave the list inconsistent: keep using it.
+            let mut pools = POOLS.lock().unwrap_or_else(|e| e.into_inner());
+            match pools.iter().find(|(k, _)| *k == n) {
+                Some((_, p)) => Arc::clone(p),
+                None => {
+                    let p = build()?;
+                    pools.push((n, Arc::clone(&p)));
+                    p
+                }
+            }
+        } else {
+            build()?
+        };
+        Ok(pool.install(f))
+    }
+
+    fn periodic(axis0: bool, axis1: bool) -> Periodic {
+        Periodic { axis0, axis1 }
+    }
+
+    /// Labels the connected components of a free mask (True = free). Returns (labels, K):
+    /// labels uint32 of the mask's shape, 0 off the free region, 1..=K in raster order of
+    /// each cluster's first cell; the same for any thread count.
+    #[pyfunction]
+    #[pyo3(signature = (free, connectivity=4, periodic_axis0=false, periodic_axis1=false, threads=None))]
+    pub(super) fn label_clusters<'py>(
+        py: Python<'py>,
+        free: PyReadonlyArray2<'py, bool>,
+        connectivity: i64,
+        periodic_axis0: bool,
+        periodic_axis1: bool,
+        threads: Option<i64>,
+    ) -> PyResult<(Bound<'py, PyArray2<u32>>, usize)> {
+        let conn = Connectivity::from_neighbours(connectivity).map_err(to_py)?;
+        let threads = check_threads(threads)?;
+        let [ny, nx] = [free.shape()[0], free.shape()[1]];
+        let cells = row_major(&free);
+        let cells: &[bool] = &cells;
+        let per = periodic(periodic_axis0, periodic_axis1);
+        // numpy allocates the labels: it backs large arrays with huge pages, which saves
+        // thousands of first-touch page faults (see clusters::label_into).
+        let labels = PyArray2::<u32>::zeros(py, [ny, nx], false);
+        let n = {
+            let mut rw = labels.readwrite();
+            let out = rw.as_slice_mut()?;
+            py.detach(|| {
+                in_pool(threads, || {
+                    clusters::label_into(&FreeMask(cells), ny, nx, conn, per, out)
+                })
+            })?
+            .map_err(to_py)?
+        };
+        Ok((labels, n))
+    }
+
+    /// Labels the free region and classifies its clusters for flow along `flow`. Free cells
+    /// are `~contact` when a contact mask is given, else `gap > 0`. Returns a dict (see
+    /// `_core.pyi`).
+    #[pyfunction]
+    #[pyo3(signature = (
+        gap, dx, contact=None, connectivity=4, periodic_axis0=false, periodic_axis1=false,
+        flow="0", threads=None
+    ))]
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn classify_clusters<'py>(
+        py: Python<'py>,
+        gap: PyReadonlyArray2<'py, f64>,
+        dx: f64,
+        contact: Option<PyReadonlyArray2<'py, bool>>,
+        connectivity: i64,
+        periodic_axis0: bool,
+        periodic_axis1: bool,
+        flow: &str,
+        threads: Option<i64>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let conn = Connectivity::from_neighbours(connectivity).map_err(to_py)?;
+        let flow = Flow::parse(flow).map_err(to_py)?;
+        let per = periodic(periodic_axis0, periodic_axis1);
+        flow.check_periodic(per).map_err(to_py)?;
+        let threads = check_threads(threads)?;
+        let [ny, nx] = [gap.shape()[0], gap.shape()[1]];
+        if let Some(c) = &contact {
+            if c.shape() != gap.shape() {
+                return Err(to_py(Error::invalid(
+                    "contact",
+                    format!(
+                        "must have the shape of gap {:?}, got {:?}",
+                        gap.shape(),
+                        c.shape()
+                    ),
+                )));
+            }
+        }
+        let g = row_major(&gap);
+        let g: &[f64] = &g;
+        let c = contact.as_ref().map(row_major);
+        let c: Option<&[bool]> = c.as_deref();
+        let labels = PyArray2::<u32>::zeros(py, [ny, nx], false);
+        let (cl, class) = {
+            let mut rw = labels.readwrite();
+            let out = rw.as_slice_mut()?;
+            py.detach(|| {
+                in_pool(threads, || {
+                    let cl = match c {
+                        Some(c) => {
+                            clusters::analyze_into(&ContactMask(c), g, ny, nx, dx, conn, per, out)?
+                        }
+                        None => {
+                            clusters::analyze_into(&PositiveGap(g), g, ny, nx, dx, conn, per, out)?
+                        }
+                    };
+                    let class = clusters::classify(&cl, flow)?;
+                    Ok::<_, Error>((cl, class))
+                })
+            })?
+            .map_err(to_py)?
+        };
+        let d = PyDict::new(py);
+        d.set_item("labels", labels)?;
+        d.set_item("n_clusters", cl.n_clusters)?;
+        d.set_item("areas", PyArray1::from_vec(py, cl.areas))?;
+        d.set_item("volumes", PyArray1::from_vec(py, cl.volumes))?;
+        d.set_item("touches", PyArray1::from_vec(py, cl.touches))?;
+        d.set_item("classes", PyArray1::from_vec(py, class.classes))?;
+        d.set_item("spanning_volume", class.spanning_volume)?;
+        d.set_item("dead_end_volume", class.dead_end_volume)?;
+        d.set_item("trapped_volume", class.trapped_volume)?;
+        d.set_item("free_volume", class.free_volume)?;
+        d.set_item("spanning_area", class.spanning_area)?;
+        d.set_item("dead_end_area", class.dead_end_area)?;
+        d.set_item("trapped_area", class.trapped_area)?;
+        d.set_item("free_area", class.free_area)?;
+        d.set_item("n_spanning", class.n_spanning)?;
+        d.set_item("n_dead_end", class.n_dead_end)?;
+        d.set_item("n_trapped", class.n_trapped)?;
+        Ok(d)
+    }
+}
+// ---- end clusters ----
+
+// ---- contact problem ----
+// A surface on an elastic half-space: kernel table, FFT operator and the Lawson–Hanson factor,
+// kept across solves so a sweep can warm-start (core: influence.rs, operator.rs, nnls.rs).
+mod contact_py {
+    use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
+    use pyo3::prelude::*;
+    use pyo3::types::PyDict;
+
+    use super::{check_positive, to_py};
+    use crate::error::Error;
+    use crate::influence::Kernel;
+    use crate::nnls::{Factor, LawsonHanson, Options, Pivoting, Start};
+    use crate::operator::{Boundary, Operator};
+
+    fn field<'py>(
+        py: Python<'py>,
+        v: Vec<f64>,
+        ny: usize,
+        nx: usize,
+    ) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        PyArray1::from_vec(py, v).reshape([ny, nx])
+    }
+
+    pub(super) fn boundary_from(name: &str) -> PyResult<Boundary> {
+        match name {
+            "free" => Ok(Boundary::Free),
+            "periodic" => Ok(Boundary::Periodic),
+            other => Err(to_py(Error::invalid(
+                "boundary",
+                format!("must be 'free' or 'periodic', got {other:?}"),
+            ))),
+        }
+    }
+
+    pub(super) fn heights_vec(h: &PyReadonlyArray2<'_, f64>) -> PyResult<(Vec<f64>, usize, usize)> {
+        let a = h.as_array();
+        let (ny, nx) = a.dim();
+        if ny == 0 || nx == 0 {
+            return Err(to_py(Error::invalid(
+                "heights",
+                "must have at least one point",
+            )));
+        }
+        let v: Vec<f64> = a.iter().copied().collect();
+        if v.iter().any(|x| !x.is_finite()) {
+            return Err(to_py(Error::invalid(
+                "heights",
+                "contains NaN or infinite values",
+            )));
+        }
+        Ok((v, ny, nx))
+    }
+
+    /// An elastic rough surface against a rigid flat, ready to be solved at many approaches.
+    #[pyclass(name = "ContactProblem", module = "leakpath._core")]
+    pub(super) struct ContactProblem {
+        kernel: Kernel,
+        op: Operator,
+        h: Vec<f64>,
+        factor: Factor,
+    }
+
+    #[pymethods]
+    impl ContactProblem {
+        #[new]
+        #[pyo3(signature = (heights, dx, e_star, boundary="free", memory_limit=8u64 << 30))]
+        fn new(
+            py: Python<'_>,
+            heights: PyReadonlyArray2<'_, f64>,
+            dx: f64,
+            e_star: f64,
+            boundary: &str,
+            memory_limit: u64,
+        ) -> PyResult<Self> {
+            check_positive("dx", dx)?;
+            check_positive("e_star", e_star)?;
+            let bc = boundary_from(boundary)?;
+            let (h, ny, nx) = heights_vec(&heights)?;
+            let need = Operator::memory_estimate(ny, nx, bc) + (ny * nx * 8 * 8) as u64;
+            if need > memory_limit {
+                return Err(to_py(Error::TooLarge {
+                    bytes: need,
+                    limit: memory_limit,
+                    what: format!("the influence operator of a {ny} × {nx} grid"),
+                }));
+            }
+            let (kernel, op) = py.detach(|| match bc {
+                Boundary::Free => {
+                    let kernel = Kernel::new(ny, nx, dx, e_star);
+                    let op = Operator::free(&kernel);
+                    (kernel, op)
+                }
+                Boundary::Periodic => {
+                    // The periodic C_PP blocks come from the circulant's first column.
+                    let op = Operator::periodic(ny, nx, dx, e_star);
+                    let mut unit = vec![0.0; ny * nx];
+                    unit[0] = 1.0;
+                    let mut column = vec![0.0; ny * nx];
+                    op.apply(&unit, &mut column);
+                    (Kernel::from_table(ny, nx, dx, e_star, column), op)
+                }
+            });
+            let n = h.len();
+            Ok(ContactProblem {
+                kernel,
+                op,
+                h,
+                factor: Factor::new(n, memory_limit),
+            })
+        }
+
+        /// Number of points in the passive (contact) set kept from the last solve.
+        #[getter]
+        fn n_passive(&self) -> usize {
+            self.factor.len()
+        }
+
+        /// u = C p by FFT (shape (ny, nx)).
+        fn apply<'py>(
+            &self,
+            py: Python<'py>,
+            pressure: PyReadonlyArray2<'_, f64>,
+        ) -> PyResult<Bound<'py, PyArray2<f64>>> {
+            let a = pressure.as_array();
+            if a.dim() != (self.op.ny, self.op.nx) {
+                return Err(to_py(Error::invalid(
+                    "pressure",
+                    "shape differs from the surface",
+                )));
+            }
+            let p: Vec<f64> = a.iter().copied().collect();
+            let mut u = vec![0.0; p.len()];
+            py.detach(|| self.op.apply(&p, &mut u));
+            field(py, u, self.op.ny, self.op.nx)
+        }
+
+        /// The dense block C_PP (k × k) for flat indices (Love or periodic coefficients).
+        fn block<'py>(
+            &self,
+            py: Python<'py>,
+            indices: PyReadonlyArray1<'_, i64>,
+        ) -> PyResult<Bound<'py, PyArray2<f64>>> {
+            let n = self.h.len() as i64;
+            let idx: Vec<usize> = indices
+                .as_array()
+                .iter()
+                .map(|&i| {
+                    if (0..n).contains(&i) {
+                        Ok(i as usize)
+                    } else {
+                        Err(to_py(Error::invalid(
+                            "indices",
+                            format!("{i} is outside the grid"),
+                        )))
+                    }
+                })
+                .collect::<PyResult<_>>()?;
+            let k = idx.len();
+            let b = py.detach(|| self.kernel.block(&idx));
+            // Column-major and symmetric: the same numbers read row-major.
+            PyArray1::from_vec(py, b).reshape([k, k])
+        }
+
+        /// Lawson–Hanson solve at `approach`. `start`: "cold" (p = 0, the paper), "previous"
+        /// (the passive set of the last solve) or "set" with `contact_set` (flat indices).
+        #[pyo3(signature = (approach, start="cold", contact_set=None, tol=1e-11, max_iter=None, block=false))]
+        #[allow(clippy::too_many_arguments)]
+        fn solve_lawson_hanson<'py>(
+            &mut self,
+            py: Python<'py>,
+            approach: f64,
+            start: &str,
+            contact_set: Option<PyReadonlyArray1<'_, i64>>,
+            tol: f64,
+            max_iter: Option<usize>,
+            block: bool,
+        ) -> PyResult<Bound<'py, PyDict>> {
+            if !(approach.is_finite() && approach >= 0.0) {
+                return Err(to_py(Error::invalid(
+                    "approach",
+                    format!("must be ≥ 0, got {approach}"),
+                )));
+            }
+            check_positive("tol", tol)?;
+            let n = self.h.len();
+            let set: Option<Vec<usize>> = match (start, contact_set) {
+                ("set", Some(s)) => Some(
+                    s.as_array()
+                        .iter()
+                        .map(|&i| {
+                            if (0..n as i64).contains(&i) {
+                                Ok(i as usize)
+                            } else {
+                                Err(to_py(Error::invalid(
+                                    "warm_start",
+                                    "contact set index outside the grid",
+                                )))
+                            }
+                        })
+                        .collect::<PyResult<_>>()?,
+                ),
+                ("set", None) => {
+                    return Err(to_py(Error::invalid(
+                        "warm_start",
+                        "start='set' needs contact_set",
+                    )))
+                }
+                ("cold" | "previous", _) => None,
+                (other, _) => {
+                    return Err(to_py(Error::invalid(
+                        "start",
+                        format!("must be 'cold', 'previous' or 'set', got {other:?}"),
+                    )))
+                }
+            };
+            let opts = Options {
+                tol,
+                max_iter: max_iter.unwrap_or(50 * n + 1000),
+                pivoting: if block {
+                    Pivoting::Block
+                } else {
+                    Pivoting::Single
+                },
+                memory_limit: 0,
+            };
+            let start_kind = start.to_string();
+            let t0 = std::time::Instant::now();
+            let (ny, nx) = (self.op.ny, self.op.nx);
+            let ContactProblem {
+                kernel,
+                op,
+                h,
+                factor,
+            } = self;
+            let result = py.detach(|| {
+                let mut lh = LawsonHanson::new(kernel, op, h, factor);
+                let last = std::sync::Mutex::new(std::time::Instant::now());
+                let should_stop = || {
+                    let mut t = last.lock().unwrap_or_else(|e| e.into_inner());
+                    if t.elapsed().as_millis() < 100 {
+                        return false;
+                    }
+                    *t = std::time::Instant::now();
+                    Python::attach(|py| py.check_signals().is_err())
+                };
+                let start = match (start_kind.as_str(), &set) {
+                    ("previous", _) => Start::Previous,
+                    (_, Some(s)) => Start::Set(s),
+                    _ => Start::Cold,
+                };
+                lh.solve(approach, start, &opts, &should_stop)
+            });
+            let sol = result.map_err(to_py)?;
+            let seconds = t0.elapsed().as_secs_f64();
+            let d = PyDict::new(py);
+            d.set_item("pressure", field(py, sol.pressure, ny, nx)?)?;
+            d.set_item("displacement", field(py, sol.displacement, ny, nx)?)?;
+            d.set_item("gap", field(py, sol.gap, ny, nx)?)?;
+            d.set_item("approach", sol.approach)?;
+            d.set_item("iterations", sol.iterations)?;
+            d.set_item("kkt", sol.kkt)?;
+            d.set_item("n_contact", sol.n_contact)?;
+            d.set_item("seconds", seconds)?;
+            Ok(d)
+        }
+    }
+}
+// ---- end contact problem ----
+
+// ---- polonsky-keer ----
+// Polonsky–Keer constrained conjugate gradients on the FFT operator (core: pk.rs).
+mod pk_py {
+    use std::borrow::Cow;
+    use std::panic::{catch_unwind, AssertUnwindSafe};
+    use std::time::Instant;
+
+    use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray2, PyUntypedArrayMethods};
+    use pyo3::exceptions::PyRuntimeError;
+    use pyo3::prelude::*;
+    use pyo3::types::PyDict;
+
+    use super::to_py;
+    use crate::error::Error;
+    use crate::operator::Boundary;
+    use crate::pk::{self, Control, Options, Problem};
+
+    /// Default `memory_limit`: 8 GiB.
+    const DEFAULT_MEMORY_LIMIT: u64 = 8 << 30;
+
+    fn invalid(name: &'static str, msg: String) -> PyErr {
+        to_py(Error::invalid(name, msg))
+    }
+
+    /// Row-major values of a 2-D array, copied only when it is not C-contiguous. (`as_slice`
+    /// alone also accepts Fortran-contiguous arrays, whose memory order is column-major.)
+    fn row_major<'a>(a: &'a PyReadonlyArray2<'_, f64>) -> Cow<'a, [f64]> {
+        match a.as_slice() {
+            Ok(s) if a.is_c_contiguous() => Cow::Borrowed(s),
+            _ => Cow::Owned(a.as_array().iter().copied().collect()),
+        }
+    }
+
+    /// Frictionless normal contact of an elastic rough surface against a rigid flat by
+    /// Polonsky–Keer conjugate gradients. Exactly one of `approach` / `mean_pressure`.
+    /// Returns a dict: pressure, displacement, gap (2-D), approach, iterations, applies, kkt,
+    /// load, mean_pressure, contact_points, seconds.
+    #[pyfunction]
+    #[pyo3(signature = (
+        heights, dx, e_star, boundary="free", approach=None, mean_pressure=None, tol=None,
+        max_iter=None, initial_pressure=None, memory_limit=None
+    ))]
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn solve_polonsky_keer<'py>(
+        py: Python<'py>,
+        heights: PyReadonlyArray2<'py, f64>,
+        dx: f64,
+        e_star: f64,
+        boundary: &str,
+        approach: Option<f64>,
+        mean_pressure: Option<f64>,
+        tol: Option<f64>,
+        max_iter: Option<usize>,
+        initial_pressure: Option<PyReadonlyArray2<'py, f64>>,
+        memory_limit: Option<u64>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let [ny, nx] = [heights.shape()[0], heights.shape()[1]];
+        let control = match (approach, mean_pressure) {
+            (Some(d), None) => Control::Approach(d),
+            (None, Some(m)) => Control::MeanPressure(m),
+            _ => {
+                return Err(invalid(
+                    "approach",
+                    "give exactly one of approach= (displacement control) and mean_pressure= \
+                     (load control)"
+                        .into(),
+                ))
+            }
+        };
+        let boundary = match boundary {
+            "free" => Boundary::Free,
+            "periodic" => Boundary::Periodic,
+            other => {
+                return Err(invalid(
+                    "boundary",
+                    format!("must be 'free' or 'periodic', got {other:?}"),
+                ))
+            }
+        };
+        if let Some(p0) = &initial_pressure {
+            let s = p0.shape();
+            if s != [ny, nx] {
+                return Err(invalid(
+                    "initial_pressure",
+                    format!(
+                        "must have the shape of the heights ({ny}, {nx}), got ({}, {})",
+                        s[0], s[1]
+                    ),
+                ));
+            }
+        }
+        let h = row_major(&heights);
+        let h: &[f64] = &h;
+        let p0 = initial_pressure.as_ref().map(row_major);
+        let p0: Option<&[f64]> = p0.as_deref();
+        let problem = Problem {
+            heights: h,
+            ny,
+            nx,
+            dx,
+            e_star,
+            boundary,
+        };
+        let tol = tol.unwrap_or(pk::DEFAULT_TOL);
+        let memory_limit = memory_limit.unwrap_or(DEFAULT_MEMORY_LIMIT);
+        let start = Instant::now();
+        let outcome = py.detach(|| {
+            // Ctrl-C: the solver polls this between iterations; check_signals runs Python's
+            // handler, which raises KeyboardInterrupt, reported here as Error::Interrupted.
+            let stop = || Python::attach(|py| py.check_signals().is_err());
+            let opts = Options {
+                tol,
+                max_iter,
+                initial_pressure: p0,
+                memory_limit: Some(memory_limit),
+                should_stop: Some(&stop),
+            };
+            catch_unwind(AssertUnwindSafe(|| pk::solve(&problem, control, &opts)))
+        });
+        let seconds = start.elapsed().as_secs_f64();
+        let sol = match outcome {
+            Ok(r) => r.map_err(to_py)?,
+            Err(panic) => {
+                let msg = panic
+                    .downcast_ref::<&str>()
+                    .map(|s| s.to_string())
+                    .or_else(|| panic.downcast_ref::<String>().cloned())
+                    .unwrap_or_default();
+                return Err(PyRuntimeError::new_err(format!(
+                    "internal error in the Polonsky–Keer solver: {msg}"
+                )));
+            }
+        };
+        let d = PyDict::new(py);
+        d.set_item(
+            "pressure",
+            PyArray1::from_vec(py, sol.pressure).reshape([ny, nx])?,
+        )?;
+        d.set_item(
+            "displacement",
+            PyArray1::from_vec(py, sol.displacement).reshape([ny, nx])?,
+        )?;
+        d.set_item("gap", PyArray1::from_vec(py, sol.gap).reshape([ny, nx])?)?;
+        d.set_item("approach", sol.approach)?;
+        d.set_item("iterations", sol.iterations)?;
+        d.set_item("applies", sol.applies)?;
+        d.set_item("kkt", sol.kkt)?;
+        d.set_item("load", sol.load)?;
+        d.set_item("mean_pressure", sol.mean_pressure)?;
+        d.set_item("contact_points", sol.contact_points)?;
+        d.set_item("seconds", seconds)?;
+        Ok(d)
+    }
+}
+// ---- end polonsky-keer ----
+
 #[pymodule]
 #[pyo3(name = "_core")]
 fn core_module(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add_function(wrap_pyfunction!(kernel_table, m)?)?;
+    m.add_class::<contact_py::ContactProblem>()?;
+    m.add_function(wrap_pyfunction!(clusters_py::label_clusters, m)?)?;
+    m.add_function(wrap_pyfunction!(clusters_py::classify_clusters, m)?)?;
+    m.add_function(wrap_pyfunction!(pk_py::solve_polonsky_keer, m)?)?;
     Ok(())
 }

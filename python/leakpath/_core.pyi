@@ -12,3 +12,123 @@ def kernel_table(ny: int, nx: int, dx: float, e_star: float) -> npt.NDArray[np.f
     ``dx × dx`` element under unit uniform pressure, on a half-space of contact modulus
     ``e_star``. ``K[0, 0] = 4·dx·ln(1 + √2)/(π E*)``; far away ``K → dx²/(π E* r)``.
     """
+
+# ---- polonsky-keer ----
+from typing import Any as _Any  # noqa: E402  (kept local so the section stands alone)
+from typing import Literal as _Literal  # noqa: E402
+
+def solve_polonsky_keer(
+    heights: npt.NDArray[np.float64],
+    dx: float,
+    e_star: float,
+    boundary: _Literal["free", "periodic"] = "free",
+    approach: float | None = None,
+    mean_pressure: float | None = None,
+    tol: float | None = None,
+    max_iter: int | None = None,
+    initial_pressure: npt.NDArray[np.float64] | None = None,
+    memory_limit: int | None = None,
+) -> dict[str, _Any]:
+    """Normal contact of an elastic rough surface against a rigid flat, Polonsky–Keer CG.
+
+    Finds ``p ≥ 0`` with gap ``g = max(h) − Δ − h + u ≥ 0``, ``p·g = 0``, ``u = C p`` (FFT
+    influence operator, ``boundary`` "free" or "periodic"). Give exactly one of
+
+    - ``approach`` ``Δ ≥ 0`` (displacement control; periodic: ``Δ ≤ max h − mean h``, where
+      full contact is reached — at the limit the full-contact state with ``min p = 0`` is
+      returned, beyond it ``ValueError``), or
+    - ``mean_pressure`` ``p̄ > 0`` (load control, ``F = p̄·A0``, ``A0 = ny·nx·dx²``); the
+      returned approach is ``Δ = mean over the contact set of (max h − h + u)``, positive when
+      the flat has moved down from first touch.
+
+    ``heights``: float64 array ``(ny, nx)``, finite. ``tol``: stop when the KKT certificate
+    ``max(−min g, max_{p>0} |g|, Σ p|g| / Σ p) / (max h − min h)`` is ``≤ tol`` (default
+    ``1e-10``). ``max_iter``: default ``max(5000, ⌈100·N^¼⌉)``; exceeding it raises
+    ``RuntimeError``. ``initial_pressure``: warm start (same shape; negatives clipped; rescaled
+    to the load in load control); cold start is ``p = 0`` (displacement) or uniform ``p̄``
+    (load). ``memory_limit`` (bytes, default 8 GiB): ``MemoryError`` up front when the solve
+    would need more. The GIL is released; Ctrl-C raises ``KeyboardInterrupt``.
+
+    Returns a dict: ``pressure``, ``displacement``, ``gap`` (``(ny, nx)`` float64; the gap is
+    not clamped), ``approach``, ``iterations`` (CG steps), ``applies`` (FFT convolutions),
+    ``kkt``, ``load`` (``F = dx² Σ p``), ``mean_pressure``, ``contact_points`` (``#(p > 0)``),
+    ``seconds``.
+    """
+
+class ContactProblem:
+    """An elastic rough surface against a rigid flat: Love kernel, FFT operator and the
+    Lawson–Hanson Cholesky factor, kept across solves (gap ``g = max h − Δ − h + C p``)."""
+
+    def __init__(
+        self,
+        heights: npt.NDArray[np.float64],
+        dx: float,
+        e_star: float,
+        boundary: str = "free",
+        memory_limit: int = ...,
+    ) -> None: ...
+    @property
+    def n_passive(self) -> int:
+        """Points in the contact (passive) set kept from the last solve."""
+    def apply(self, pressure: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+        """Displacement ``u = C p`` by FFT, shape ``(ny, nx)``."""
+    def block(self, indices: npt.NDArray[np.int64]) -> npt.NDArray[np.float64]:
+        """Dense block ``C_PP`` for flat indices (free-boundary Love coefficients)."""
+    def solve_lawson_hanson(
+        self,
+        approach: float,
+        start: str = "cold",
+        contact_set: npt.NDArray[np.int64] | None = None,
+        tol: float = 1e-11,
+        max_iter: int | None = None,
+        block: bool = False,
+    ) -> dict[str, _Any]:
+        """Lawson–Hanson NNLS at ``approach``; ``start`` is ``"cold"`` (p = 0), ``"previous"``
+        or ``"set"`` (with ``contact_set``); ``block=True`` lets blocks of points enter at once.
+        Returns pressure, displacement, gap (2-D), approach, iterations, kkt, n_contact, seconds.
+        """
+
+# ---- clusters ----
+from typing import Any as _Any  # noqa: E402, F811  (kept local so the section stands alone)
+
+def label_clusters(
+    free: npt.NDArray[np.bool_],
+    connectivity: int = 4,
+    periodic_axis0: bool = False,
+    periodic_axis1: bool = False,
+    threads: int | None = None,
+) -> tuple[npt.NDArray[np.uint32], int]:
+    """Connected components of a free mask (``True`` = free), 2-D.
+
+    Returns ``(labels, K)``: ``uint32`` labels of the mask's shape, 0 on non-free cells and
+    ``1..K`` on free cells in raster order of each cluster's first cell. ``connectivity`` 4
+    (edge neighbours) or 8 (edges and corners); ``periodic_axis0``/``periodic_axis1`` make the
+    first and last row/column neighbours. ``threads``: rayon threads (default all cores); the
+    result does not depend on it. The GIL is released. Bad arguments raise ``ValueError``.
+    """
+
+def classify_clusters(
+    gap: npt.NDArray[np.float64],
+    dx: float,
+    contact: npt.NDArray[np.bool_] | None = None,
+    connectivity: int = 4,
+    periodic_axis0: bool = False,
+    periodic_axis1: bool = False,
+    flow: str = "0",
+    threads: int | None = None,
+) -> dict[str, _Any]:
+    """Labels the free region and classifies its clusters for flow along ``flow``.
+
+    Free cells are ``~contact`` when a contact mask is given, else ``gap > 0``. ``gap`` must be
+    finite everywhere; ``dx > 0``. ``flow``: ``"0"``, ``"1"``, ``"either"`` or ``"both"``; wrap
+    along a flow axis is a ``ValueError`` (a periodic surface wraps across the flow).
+
+    Keys: ``labels`` (``uint32``, as :func:`label_clusters`), ``n_clusters``; per cluster
+    (entry ``k − 1`` for label ``k``): ``areas`` (cells, ``uint64``), ``volumes``
+    (``Σ g·dx²``, ``float64``), ``touches`` (bit flags 1 first row, 2 last row, 4 first column,
+    8 last column, ``uint8``), ``classes`` (1 spanning, 2 dead-end, 3 trapped, ``uint8``);
+    totals ``spanning_volume``, ``dead_end_volume``, ``trapped_volume``, ``free_volume``
+    (compensated sums over clusters, so the three classes add up to ``free_volume`` to a few
+    ulps), ``spanning_area``, ``dead_end_area``, ``trapped_area``, ``free_area`` (cells),
+    ``n_spanning``, ``n_dead_end``, ``n_trapped``.
+    """

@@ -1,0 +1,1649 @@
+//! Connected components of the free region and their percolation classes.
+//!
+//! The grid is row-major `ny × nx`; a cell is *free* when it is not in contact. Two free cells
+//! belong to the same cluster when a chain of neighbouring free cells joins them, where the
+//! neighbours of `(i, j)` are `(i ± 1, j)` and `(i, j ± 1)` (4-connectivity: fluid does not
+//! pass through a corner) or in addition the four diagonal cells (8-connectivity). With
+//! periodic wrap along an axis, the first and the last index along it are neighbours too.
+//!
+//! Labels are `1..=K` in raster order of each cluster's first cell (the first cluster met when
+//! reading row 0 left to right, then row 1, …), `0` on cells that are not free. They do not
+//! depend on the number of threads, nor on how the grid is split for them.
+//!
+//! # Algorithm
+//!
+//! The rows are split into horizontal strips of a fixed height that depends on the grid size
+//! only, labelled in parallel (rayon), each on its own:
+//!
+//! - every row is packed into 64-cell bit masks; the runs of free cells start where
+//!   `bits & !(bits << 1)` is set, and the run holding a cell is one popcount away;
+//! - a union–find over the *runs* (not the cells) joins neighbouring runs of consecutive
+//!   rows. The neighbouring pairs are exactly the runs of `above & below` (4-connectivity;
+//!   8-connectivity adds the same with `above` shifted by one column either way), so they
+//!   are found with bit operations, one per pair, with no per-cell branching;
+//! - union by the smaller index (Rem's algorithm) keeps every parent index below its child's,
+//!   so one pass in index order numbers the components in raster order.
+//!
+//! The strips are then joined along their seams (and the periodic wraps) by a second, small
+//! union–find over the strip components, and every row of the output is written once, cell
+//! by cell without data-dependent branches (random masks make branches mispredict).
+//! Nothing is allocated per row; the only per-cell buffer besides the output is one bit per
+//! cell.
+//!
+//! Per-cluster sums (area, free volume) are accumulated per run, then per strip component,
+//! then per cluster, always in raster order over a partition that does not depend on the
+//! thread count, so they are bit-for-bit reproducible too.
+//!
+//! # Percolation classes
+//!
+//! For flow along an axis, a cluster is *spanning* when it touches both the first and the
+//! last index along that axis, *dead-end* when it touches some boundary of the grid but does
+//! not span, and *trapped* when it touches no boundary. An axis with periodic wrap has no
+//! boundary. `Either` spans along axis 0 or axis 1, `Both` along both. The free volume is the
+//! sum of the three class volumes: `V = V_pg + V_dead + V_trapped`.
+
+use std::cell::RefCell;
+use std::sync::Mutex;
+
+use rayon::prelude::*;
+
+use crate::error::{Error, Result};
+
+/// Touch flag: the cluster has a cell in row 0.
+pub const TOUCH_FIRST_ROW: u8 = 1;
+/// Touch flag: the cluster has a cell in row `ny − 1`.
+pub const TOUCH_LAST_ROW: u8 = 2;
+/// Touch flag: the cluster has a cell in column 0.
+pub const TOUCH_FIRST_COL: u8 = 4;
+/// Touch flag: the cluster has a cell in column `nx − 1`.
+pub const TOUCH_LAST_COL: u8 = 8;
+
+/// Class code of a cluster that spans the grid along the flow direction.
+pub const SPANNING: u8 = 1;
+/// Class code of a cluster that touches a boundary but does not span.
+pub const DEAD_END: u8 = 2;
+/// Class code of a cluster that touches no boundary.
+pub const TRAPPED: u8 = 3;
+
+/// Which cells are neighbours.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Connectivity {
+    /// Edge neighbours only.
+    Four,
+    /// Edge and corner neighbours.
+    Eight,
+}
+
+impl Connectivity {
+    /// `4` or `8`, the number of neighbours of an interior cell.
+    pub fn from_neighbours(n: i64) -> Result<Self> {
+        match n {
+            4 => Ok(Connectivity::Four),
+            8 => Ok(Connectivity::Eight),
+            _ => Err(Error::invalid(
+                "connectivity",
+                format!("must be 4 (edge neighbours) or 8 (edges and corners), got {n}"),
+            )),
+        }
+    }
+}
+
+/// Periodic wrap along each axis: with `axis0`, row `ny − 1` neighbours row 0; with `axis1`,
+/// column `nx − 1` neighbours column 0.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Periodic {
+    pub axis0: bool,
+    pub axis1: bool,
+}
+
+/// Flow direction(s) used to call a cluster spanning.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Flow {
+    /// Spans from row 0 to row `ny − 1`.
+    Axis0,
+    /// Spans from column 0 to column `nx − 1`.
+    Axis1,
+    /// Spans along axis 0 or along axis 1.
+    Either,
+    /// Spans along axis 0 and along axis 1.
+    Both,
+}
+
+impl Flow {
+    /// Parses `"0"`, `"1"`, `"either"` or `"both"`.
+    pub fn parse(s: &str) -> Result<Self> {
+        match s {
+            "0" => Ok(Flow::Axis0),
+            "1" => Ok(Flow::Axis1),
+            "either" => Ok(Flow::Either),
+            "both" => Ok(Flow::Both),
+            _ => Err(Error::invalid(
+                "flow",
+                format!("must be \"0\", \"1\", \"either\" or \"both\", got {s:?}"),
+            )),
+        }
+    }
+
+    /// Rejects periodic wrap along a flow axis: a periodic surface wraps across the flow, and
+    /// a fluid entering at the first index and leaving at the last one needs both to be
+    /// boundaries.
+    pub fn check_periodic(self, periodic: Periodic) -> Result<()> {
+        let (along0, along1) = match self {
+            Flow::Axis0 => (true, false),
+            Flow::Axis1 => (false, true),
+            Flow::Either | Flow::Both => (true, true),
+        };
+        let fix = match self {
+            Flow::Axis0 => "wrap across the flow (axis 1) instead, or use no wrap",
+            Flow::Axis1 => "wrap across the flow (axis 0) instead, or use no wrap",
+            Flow::Either | Flow::Both => "every edge is an inlet or an outlet here: use no wrap",
+        };
+        if along0 && periodic.axis0 {
+            return Err(Error::invalid(
+                "periodic_axis0",
+                format!("periodic wrap along a flow axis (0) leaves no inlet or outlet; {fix}"),
+            ));
+        }
+        if along1 && periodic.axis1 {
+            return Err(Error::invalid(
+                "periodic_axis1",
+                format!("periodic wrap along a flow axis (1) leaves no inlet or outlet; {fix}"),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// A source of the free-cell mask, read 64 cells at a time.
+pub trait FreeCells: Sync {
+    /// Number of cells.
+    fn len(&self) -> usize;
+    /// True when there are no cells.
+    fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+    /// Bit `k` is set iff cell `start + k` (row-major flat index) is free, for `k < len ≤ 64`;
+    /// higher bits are zero.
+    fn pack(&self, start: usize, len: usize) -> u64;
+}
+
+/// `true` = free.
+pub struct FreeMask<'a>(pub &'a [bool]);
+/// `true` = in contact; free is its complement.
+pub struct ContactMask<'a>(pub &'a [bool]);
+/// Free where the gap is positive (NaN is not positive; callers reject NaN gaps).
+pub struct PositiveGap<'a>(pub &'a [f64]);
+
+#[inline(always)]
+fn low_mask(len: usize) -> u64 {
+    if len >= 64 {
+        u64::MAX
+    } else {
+        (1u64 << len) - 1
+    }
+}
+
+/// Packs up to 64 bools into bits, eight at a time: a multiply gathers bit 0 of each byte of a
+/// little-endian word into the top byte (the shifted copies never collide, so no carries).
+#[inline(always)]
+fn pack_bools(cells: &[bool]) -> u64 {
+    let mut bits = 0u64;
+    let mut shift = 0;
+    let mut chunks = cells.chunks_exact(8);
+    for c in &mut chunks {
+        let word = u64::from_le_bytes([
+            c[0] as u8, c[1] as u8, c[2] as u8, c[3] as u8, c[4] as u8, c[5] as u8, c[6] as u8,
+            c[7] as u8,
+        ]);
+        bits |= (word.wrapping_mul(0x0102_0408_1020_4080) >> 56) << shift;
+        shift += 8;
+    }
+    for (k, &c) in chunks.remainder().iter().enumerate() {
+        bits |= (c as u64) << (shift + k);
+    }
+    bits
+}
+
+impl FreeCells for FreeMask<'_> {
+    fn len(&self) -> usize {
+        self.0.len()
+    }
+    #[inline(always)]
+    fn pack(&self, start: usize, len: usize) -> u64 {
+        pack_bools(&self.0[start..start + len])
+    }
+}
+
+impl FreeCells for ContactMask<'_> {
+    fn len(&self) -> usize {
+        self.0.len()
+    }
+    #[inline(always)]
+    fn pack(&self, start: usize, len: usize) -> u64 {
+        !pack_bools(&self.0[start..start + len]) & low_mask(len)
+    }
+}
+
+impl FreeCells for PositiveGap<'_> {
+    fn len(&self) -> usize {
+        self.0.len()
+    }
+    #[inline(always)]
+    fn pack(&self, start: usize, len: usize) -> u64 {
+        let mut bits = 0u64;
+        for (k, &g) in self.0[start..start + len].iter().enumerate() {
+            bits |= ((g > 0.0) as u64) << k;
+        }
+        bits
+    }
+}
+
+/// Number of 64-cell words per row.
+fn words(nx: usize) -> usize {
+    nx.div_ceil(64)
+}
+
+/// One row as bit masks: free cells, run starts, and the number of runs begun before each
+/// word, so that the run holding a cell is found with one popcount.
+#[derive(Default)]
+struct RowBits {
+    bits: Vec<u64>,
+    starts: Vec<u64>,
+    before: Vec<u32>,
+    runs: u32,
+}
+
+impl RowBits {
+    /// Loads a row's free bits (bits past the row's end must be zero).
+    #[inline(always)]
+    fn load(&mut self, bits: &[u64]) {
+        self.bits.clear();
+        self.bits.extend_from_slice(bits);
+        self.starts.clear();
+        self.before.clear();
+        let mut carry = 0u64;
+        let mut n = 0u32;
+        for &b in bits {
+            // A run starts at a free cell whose left neighbour is not free.
+            let s = b & !((b << 1) | carry);
+            carry = b >> 63;
+            self.before.push(n);
+            self.starts.push(s);
+            n += s.count_ones();
+        }
+        self.runs = n;
+    }
+
+    #[inline]
+    fn is_free(&self, x: usize) -> bool {
+        (self.bits[x / 64] >> (x % 64)) & 1 != 0
+    }
+
+    /// Index, within the row, of the run holding the free cell `x`.
+    #[inline(always)]
+    fn run_at(&self, x: usize) -> u32 {
+        let (w, b) = (x / 64, x % 64);
+        // Starts at or left of bit b; `2 << 63` wraps to 0, giving the full mask.
+        self.before[w] + (self.starts[w] & (2u64 << b).wrapping_sub(1)).count_ones() - 1
+    }
+}
+
+/// Calls `f(i, j)` once for each pair of run `i` of row `a` and run `j` of row `b` (two
+/// vertically adjacent rows) that are neighbours through a shared column (`SHIFT = 0`), or
+/// diagonally with `a`'s cell one column left (`SHIFT = 1`) or right (`SHIFT = -1`) of `b`'s.
+///
+/// Where a (shifted) run of `a` overlaps a run of `b`, the common cells form one contiguous
+/// stretch, and stretches of different pairs are separated by a blocked cell (runs of a row
+/// are). So each pair is met exactly once, at the first cell of its stretch, and those cells
+/// are the starts of the runs of `a & b` — found 64 at a time, with no per-run branching
+/// except the loop over the pairs themselves.
+#[inline(always)]
+fn for_each_pair<const SHIFT: i32>(a: &RowBits, b: &RowBits, mut f: impl FnMut(u32, u32)) {
+    let n = a.bits.len();
+    let mut carry = 0u64;
+    for w in 0..n {
+        let aw = match SHIFT {
+            0 => a.bits[w],
+            1 => (a.bits[w] << 1) | if w > 0 { a.bits[w - 1] >> 63 } else { 0 },
+            _ => (a.bits[w] >> 1) | if w + 1 < n { a.bits[w + 1] << 63 } else { 0 },
+        };
+        let o = aw & b.bits[w];
+        let mut s = o & !((o << 1) | carry);
+        carry = o >> 63;
+        while s != 0 {
+            let x = w * 64 + s.trailing_zeros() as usize;
+            let xa = (x as isize - SHIFT as isize) as usize;
+            f(a.run_at(xa), b.run_at(x));
+            s &= s - 1;
+        }
+    }
+}
+
+/// Calls `f(i, j)` for every pair of neighbouring runs of the vertically adjacent rows `a`
+/// (above) and `b` (below).
+#[inline(always)]
+fn for_each_neighbour(a: &RowBits, b: &RowBits, setup: &Setup, mut f: impl FnMut(u32, u32)) {
+    for_each_pair::<0>(a, b, &mut f);
+    if setup.connectivity == Connectivity::Eight {
+        for_each_pair::<1>(a, b, &mut f);
+        for_each_pair::<-1>(a, b, &mut f);
+        if setup.periodic.axis1 {
+            // Corner neighbours across the axis-1 wrap.
+            let last = setup.nx - 1;
+            if a.is_free(last) && b.is_free(0) {
+                f(a.runs - 1, 0);
+            }
+            if a.is_free(0) && b.is_free(last) {
+                f(0, b.runs - 1);
+            }
+        }
+    }
+}
+
+/// Joins the sets of `x` and `y` in a forest where every parent index is at most its
+/// child's, keeping it so: a set's root is its smallest index (its first element in raster
+/// order).
+///
+/// Rem's algorithm with splicing: climb from both ends at once, always from the side whose
+/// parent is larger, re-pointing it to the smaller parent on the way. It stops as soon as the
+/// two paths meet, so the common case here — a fresh run joining its first neighbour above —
+/// costs one step.
+#[inline(always)]
+fn union(parent: &mut [u32], mut x: u32, mut y: u32) {
+    loop {
+        let (px, py) = (parent[x as usize], parent[y as usize]);
+        if px == py {
+            return;
+        }
+        if px > py {
+            parent[x as usize] = py;
+            if px == x {
+                return;
+            }
+            x = px;
+        } else {
+            parent[y as usize] = px;
+            if py == y {
+                return;
+            }
+            y = py;
+        }
+    }
+}
+
+/// Numbers the components of a union–find forest whose parents precede their children:
+/// `comp[i]` gets the component of entry `i`, components numbered `0..` in order of their
+/// first element; returns the count. `parent` is flattened on the way; `rank` is scratch.
+///
+/// In index order, an entry's parent has already been pointed at its root, so one step
+/// flattens the entry too; a component's number is the count of roots before its root. Written
+/// without selects: a select here gets compiled to a branch that mispredicts on random masks.
+fn number_components(parent: &mut [u32], rank: &mut Vec<u32>, comp: &mut [u32]) -> u32 {
+    rank.clear();
+    rank.resize(parent.len(), 0);
+    let mut n = 0u32;
+    for i in 0..parent.len() {
+        let root = parent[parent[i] as usize];
+        parent[i] = root;
+        rank[i] = n;
+        n += (root as usize == i) as u32;
+    }
+    for (c, &p) in comp.iter_mut().zip(parent.iter()) {
+        *c = rank[p as usize];
+    }
+    n
+}
+
+/// Σ `row[s..e]` in index order.
+///
+/// Most runs of a random mask are short, so the first four terms are always loaded and
+/// weighted by 1 or 0 from a table: no data-dependent branch (a `select` would be compiled to
+/// one, which mispredicts). The gap is finite, so a weighted-out term is an exact zero and
+/// `x + 0.0 == x`: the result is the plain sequential sum.
+#[inline]
+fn run_sum(row: &[f64], s: usize, e: usize) -> f64 {
+    const WEIGHTS: [[f64; 4]; 5] = [
+        [0.0, 0.0, 0.0, 0.0],
+        [1.0, 0.0, 0.0, 0.0],
+        [1.0, 1.0, 0.0, 0.0],
+        [1.0, 1.0, 1.0, 0.0],
+        [1.0, 1.0, 1.0, 1.0],
+    ];
+    match row.get(s..s + 4) {
+        Some(v) => {
+            let w = &WEIGHTS[(e - s).min(4)];
+            let mut acc = v[0] * w[0] + v[1] * w[1] + v[2] * w[2] + v[3] * w[3];
+            for &x in row.get(s + 4..e).unwrap_or(&[]) {
+                acc += x;
+            }
+            acc
+        }
+        None => row[s..e].iter().sum(),
+    }
+}
+
+/// Writes one row of labels. `lab` holds, for each stretch between run boundaries of the row,
+/// its label: `lab[0] = 0` (before the first run), then `label, 0` for each run.
+///
+/// Indexing by the number of boundaries passed makes the loop free of data-dependent
+/// branches (a select on the free bit gets compiled to a branch, which mispredicts on
+/// random masks).
+#[inline]
+fn write_row(row: &mut [u32], bits: &[u64], lab: &[u32]) {
+    #[inline(always)]
+    fn word(cells: &mut [u32], t: u64, idx: &mut usize, lab: &[u32]) {
+        let mut t = t;
+        for o in cells.iter_mut() {
+            *idx += (t & 1) as usize;
+            t >>= 1;
+            *o = lab[*idx];
+        }
+    }
+    let (mut idx, mut carry) = (0usize, 0u64);
+    let mut cells = row.chunks_exact_mut(64);
+    let mut words = bits.iter();
+    // Whole words first: a fixed trip count lets the compiler unroll.
+    for (chunk, &b) in (&mut cells).zip(&mut words) {
+        // Run boundaries: cells that differ from their left neighbour.
+        word(chunk, b ^ ((b << 1) | carry), &mut idx, lab);
+        carry = b >> 63;
+    }
+    if let Some(&b) = words.next() {
+        word(
+            cells.into_remainder(),
+            b ^ ((b << 1) | carry),
+            &mut idx,
+            lab,
+        );
+    }
+}
+
+/// Per-thread buffers reused from strip to strip, so that nothing is allocated per row.
+#[derive(Default)]
+struct Scratch {
+    prev: RowBits,
+    cur: RowBits,
+    /// Union–find forest over the strip's runs, then each run's strip component.
+    parent: Vec<u32>,
+    rank: Vec<u32>,
+    /// Per run of the strip (with sums only): cells and Σ gap.
+    run_len: Vec<u32>,
+    run_gap: Vec<f64>,
+    /// Runs on the grid's edges and the edges they touch (with sums only).
+    edge: Vec<(u32, u8)>,
+    /// Run starts and ends of one row (with sums only).
+    starts: Vec<u32>,
+    ends: Vec<u32>,
+}
+
+/// Buffers of the whole grid used while labelling it: the free bits, and the union–find over
+/// the strip components with its scratch and result.
+#[derive(Default)]
+struct GridBuffers {
+    bits: Vec<u64>,
+    parent: Vec<u32>,
+    rank: Vec<u32>,
+    cluster: Vec<u32>,
+}
+
+/// Kept buffers above this many bytes are dropped after use.
+const KEEP_BYTES: usize = 64 << 20;
+
+thread_local! {
+    // Kept between calls, per thread: fresh buffers of a few MB cost thousands of page
+    // faults, which on virtual machines cost a good part of the labelling time.
+    static SCRATCH: RefCell<Scratch> = RefCell::new(Scratch::default());
+    static GRID: RefCell<GridBuffers> = RefCell::new(GridBuffers::default());
+}
+
+impl Scratch {
+    fn bytes(&self) -> usize {
+        4 * (self.parent.capacity() + self.rank.capacity() + self.run_len.capacity())
+            + 8 * self.run_gap.capacity()
+    }
+}
+
+impl GridBuffers {
+    fn bytes(&self) -> usize {
+        8 * self.bits.capacity()
+            + 4 * (self.parent.capacity() + self.rank.capacity() + self.cluster.capacity())
+    }
+}
+
+/// Runs `f` with this thread's kept buffers (or fresh ones if they are in use, which only a
+/// re-entrant call could cause), then keeps them unless they grew too large.
+fn with_kept<T: Default, R>(
+    key: &'static std::thread::LocalKey<RefCell<T>>,
+    bytes: fn(&T) -> usize,
+    f: impl FnOnce(&mut T) -> R,
+) -> R {
+    key.with(|cell| match cell.try_borrow_mut() {
+        Ok(mut kept) => {
+            let r = f(&mut kept);
+            if bytes(&kept) > KEEP_BYTES {
+                *kept = T::default();
+            }
+            r
+        }
+        Err(_) => f(&mut T::default()),
+    })
+}
+
+/// What the seams, the final labelling and the per-cluster sums need of a labelled strip.
+struct Strip {
+    n_comp: u32,
+    /// `row_runs[r]..row_runs[r + 1]` are the strip's runs in its row `r`.
+    row_runs: Vec<u32>,
+    /// Per strip component (empty unless sums were asked for).
+    sums: CompSums,
+}
+
+/// Per-component sums of a strip: cells, Σ gap, touch flags.
+#[derive(Default)]
+struct CompSums {
+    area: Vec<u64>,
+    gap_sum: Vec<f64>,
+    touch: Vec<u8>,
+}
+
+/// Strips' sums kept for later calls (as the thread-local buffers, to save page faults; a
+/// strip's sums outlive its thread's work on it, so they are pooled instead).
+static COMP_SUMS: Mutex<Vec<CompSums>> = Mutex::new(Vec::new());
+
+impl CompSums {
+    fn bytes(&self) -> usize {
+        8 * (self.area.capacity() + self.gap_sum.capacity()) + self.touch.capacity()
+    }
+
+    /// Zeroed sums for `n` components, reusing pooled memory when there is some.
+    fn take(n: usize, with_gap: bool) -> Self {
+        let mut s = lock(&COMP_SUMS).pop().unwrap_or_default();
+        s.area.clear();
+        s.area.resize(n, 0);
+        s.touch.clear();
+        s.touch.resize(n, 0);
+        s.gap_sum.clear();
+        if with_gap {
+            s.gap_sum.resize(n, 0.0);
+        }
+        s
+    }
+
+    /// Returns sums to the pool, up to `KEEP_BYTES` in all.
+    fn give_back(all: impl Iterator<Item = CompSums>) {
+        let mut pool = lock(&COMP_SUMS);
+        let mut bytes: usize = pool.iter().map(CompSums::bytes).sum();
+        for s in all {
+            if bytes + s.bytes() <= KEEP_BYTES {
+                bytes += s.bytes();
+                pool.push(s);
+            }
+        }
+    }
+}
+
+/// Locks a pool; a panic while it was held cannot have left it inconsistent.
+fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+}
+
+impl Strip {
+    fn n_runs(&self) -> usize {
+        self.row_runs.last().copied().unwrap_or(0) as usize
+    }
+
+    fn rows(&self) -> usize {
+        self.row_runs.len() - 1
+    }
+
+    /// Strip components of the runs of the strip's row `r`, read from the strip's part of the
+    /// label array between labelling and finishing (see `label_strip`).
+    fn row_comps<'a>(&self, out: &'a [u32], r: usize) -> &'a [u32] {
+        let tail = out.len() - self.n_runs();
+        &out[tail + self.row_runs[r] as usize..tail + self.row_runs[r + 1] as usize]
+    }
+}
+
+#[derive(Clone, Copy)]
+struct Setup {
+    ny: usize,
+    nx: usize,
+    connectivity: Connectivity,
+    periodic: Periodic,
+}
+
+/// Labels the rows `row0..` of one strip on their own.
+///
+/// `out` is the strip's part of the label array and `bits` of the free-bit array. On return
+/// `bits` holds the free cells, and the *last* `R` cells of `out` hold the strip component of
+/// each of the strip's `R` runs; the rest of `out` is left as it was. (Storing them there
+/// rather than in a separate array saves allocating, and faulting in, a few bytes per cell;
+/// `finish_strip` reads them back before it overwrites them.)
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn label_strip<F: FreeCells>(
+    free: &F,
+    gap: Option<&[f64]>,
+    setup: &Setup,
+    row0: usize,
+    out: &mut [u32],
+    bits: &mut [u64],
+    stats: bool,
+    scratch: &mut Scratch,
+) -> Result<Strip> {
+    let nx = setup.nx;
+    let nw = words(nx);
+    let rows = out.len() / nx;
+    let Scratch {
+        prev,
+        cur,
+        parent,
+        rank,
+        run_len,
+        run_gap,
+        edge,
+        starts,
+        ends,
+    } = scratch;
+    parent.clear();
+    run_len.clear();
+    run_gap.clear();
+    edge.clear();
+    let mut row_runs = Vec::with_capacity(rows + 1);
+    row_runs.push(0u32);
+
+    for r in 0..rows {
+        let start = (row0 + r) * nx;
+        let g_row = gap.map(|g| &g[start..start + nx]);
+        if let Some(row) = g_row {
+            // A non-short-circuiting OR vectorises.
+            if row.iter().fold(false, |bad, v| bad | !v.is_finite()) {
+                let j = row.iter().position(|v| !v.is_finite()).unwrap_or(0);
+                return Err(Error::invalid(
+                    "gap",
+                    format!(
+                        "must be finite; found {} at row {}, column {j}",
+                        row[j],
+                        row0 + r
+                    ),
+                ));
+            }
+        }
+        let row_bits = &mut bits[r * nw..(r + 1) * nw];
+        for (k, word) in row_bits.iter_mut().enumerate() {
+            let c = 64 * k;
+            *word = free.pack(start + c, (nx - c).min(64));
+        }
+        cur.load(row_bits);
+        let base = parent.len() as u32;
+        parent.extend(base..base + cur.runs);
+        // Axis-1 wrap joins a run reaching the last column to one starting at column 0.
+        if setup.periodic.axis1 && cur.runs >= 2 && cur.is_free(0) && cur.is_free(nx - 1) {
+            union(parent, base, base + cur.runs - 1);
+        }
+        if r > 0 {
+            let pbase = row_runs[r - 1];
+            for_each_neighbour(prev, cur, setup, |i, j| union(parent, pbase + i, base + j));
+        }
+        row_runs.push(base + cur.runs);
+
+        if stats {
+            // Run starts and ends (one past the last cell) from the masks, then the runs; no
+            // branch depends on the data but the loops' lengths.
+            starts.clear();
+            ends.clear();
+            for (k, (&b, &st)) in cur.bits.iter().zip(&cur.starts).enumerate() {
+                let next = cur.bits.get(k + 1).map_or(0, |&n| n & 1);
+                let (mut st, mut en) = (st, b & !((b >> 1) | (next << 63)));
+                let base = (64 * k) as u32;
+                while st != 0 {
+                    starts.push(base + st.trailing_zeros());
+                    st &= st - 1;
+                }
+                while en != 0 {
+                    ends.push(base + en.trailing_zeros() + 1);
+                    en &= en - 1;
+                }
+            }
+            run_len.extend(starts.iter().zip(ends.iter()).map(|(&s, &e)| e - s));
+            if let Some(row) = g_row {
+                run_gap.extend(
+                    starts
+                        .iter()
+                        .zip(ends.iter())
+                        .map(|(&s, &e)| run_sum(row, s as usize, e as usize)),
+                );
+            }
+            // Only runs on the grid's edges touch it: at most two per row, besides the first
+            // and the last row.
+            if cur.runs > 0 {
+                let (k0, k1) = (base, base + cur.runs);
+                if row0 + r == 0 {
+                    edge.extend((k0..k1).map(|k| (k, TOUCH_FIRST_ROW)));
+                }
+                if row0 + r + 1 == setup.ny {
+                    edge.extend((k0..k1).map(|k| (k, TOUCH_LAST_ROW)));
+                }
+                if cur.is_free(0) {
+                    edge.push((k0, TOUCH_FIRST_COL));
+                }
+                if cur.is_free(nx - 1) {
+                    edge.push((k1 - 1, TOUCH_LAST_COL));
+                }
+            }
+        }
+        std::mem::swap(prev, cur);
+    }
+
+    let tail = out.len() - parent.len();
+    let n_comp = number_components(parent, rank, &mut out[tail..]);
+    let comp: &[u32] = &out[tail..];
+
+    let mut sums = CompSums::default();
+    if stats {
+        sums = CompSums::take(n_comp as usize, gap.is_some());
+        for &(k, flag) in edge.iter() {
+            sums.touch[comp[k as usize] as usize] |= flag;
+        }
+        if gap.is_some() {
+            for ((&c, &n), &v) in comp.iter().zip(run_len.iter()).zip(run_gap.iter()) {
+                sums.area[c as usize] += u64::from(n);
+                sums.gap_sum[c as usize] += v;
+            }
+        } else {
+            for (&c, &n) in comp.iter().zip(run_len.iter()) {
+                sums.area[c as usize] += u64::from(n);
+            }
+        }
+    }
+    Ok(Strip {
+        n_comp,
+        row_runs,
+        sums,
+    })
+}
+
+/// [`label_strip`] with the POPCNT instruction when the CPU has it. Finding the run that holds a
+/// cell is a popcount, and the x86-64 baseline the wheel is built for lacks the instruction
+/// (its software fallback is about ten instructions).
+#[allow(clippy::too_many_arguments)]
+fn label_strip_fast<F: FreeCells>(
+    free: &F,
+    gap: Option<&[f64]>,
+    setup: &Setup,
+    row0: usize,
+    out: &mut [u32],
+    bits: &mut [u64],
+    stats: bool,
+    scratch: &mut Scratch,
+) -> Result<Strip> {
+    #[cfg(target_arch = "x86_64")]
+    {
+        #[target_feature(enable = "popcnt")]
+        #[allow(clippy::too_many_arguments)]
+        unsafe fn with_popcnt<F: FreeCells>(
+            free: &F,
+            gap: Option<&[f64]>,
+            setup: &Setup,
+            row0: usize,
+            out: &mut [u32],
+            bits: &mut [u64],
+            stats: bool,
+            scratch: &mut Scratch,
+        ) -> Result<Strip> {
+            label_strip(free, gap, setup, row0, out, bits, stats, scratch)
+        }
+        if std::arch::is_x86_feature_detected!("popcnt") {
+            // SAFETY: a `target_feature` function may be called only on a CPU with the
+            // feature, which was just checked.
+            return unsafe { with_popcnt(free, gap, setup, row0, out, bits, stats, scratch) };
+        }
+    }
+    label_strip(free, gap, setup, row0, out, bits, stats, scratch)
+}
+
+/// Writes the final labels of a strip. `cluster` maps the strip's components to clusters.
+///
+/// The runs' components sit in the last `R` cells of `out` (see `label_strip`). A row's are read
+/// before the row is written, and writing rows `..=r` cannot reach the components of later
+/// rows: those rows hold at least one cell per remaining run, so the cells after row `r` number
+/// at least the remaining runs.
+fn finish_strip(
+    st: &Strip,
+    out: &mut [u32],
+    bits: &[u64],
+    nx: usize,
+    cluster: &[u32],
+    lab: &mut Vec<u32>,
+) {
+    let nw = words(nx);
+    for r in 0..st.rows() {
+        let comps = st.row_comps(out, r);
+        let need = 2 * comps.len() + 1;
+        // `lab` = [0, label, 0, label, 0, …]; the zeros are never overwritten.
+        if lab.len() < need {
+            lab.resize(need, 0);
+        }
+        for (pair, &c) in lab[1..need].chunks_exact_mut(2).zip(comps) {
+            pair[0] = cluster[c as usize] + 1;
+        }
+        write_row(
+            &mut out[r * nx..(r + 1) * nx],
+            &bits[r * nw..(r + 1) * nw],
+            &lab[..need],
+        );
+    }
+}
+
+/// Strip height used for a grid: strips of at least ~32k cells so that a strip's work
+/// outweighs its seam, and at most 128 strips. It depends on the grid only, never on the
+/// thread count, so per-cluster sums are reproducible.
+fn default_strip_rows(ny: usize, nx: usize) -> usize {
+    const MIN_CELLS: usize = 1 << 15;
+    const MAX_STRIPS: usize = 128;
+    let by_cells = MIN_CELLS.div_ceil(nx.max(1));
+    let by_count = ny.div_ceil(MAX_STRIPS);
+    by_cells.max(by_count).clamp(1, ny.max(1))
+}
+
+/// Number of clusters and (optionally) per-cluster sums, before scaling by `dx²`.
+#[derive(Default)]
+struct Sums {
+    n_clusters: usize,
+    area: Vec<u64>,
+    gap_sum: Vec<f64>,
+    touch: Vec<u8>,
+}
+
+fn check_shape(name: &'static str, len: usize, ny: usize, nx: usize) -> Result<()> {
+    let n = ny.checked_mul(nx).ok_or_else(|| {
+        Error::invalid(
+            name,
+            format!("shape ({ny}, {nx}) overflows the address space"),
+        )
+    })?;
+    if len != n {
+        return Err(Error::invalid(
+            name,
+            format!("has {len} cells, but the shape ({ny}, {nx}) needs {n}"),
+        ));
+    }
+    // Cell positions, run and component indices and labels are u32.
+    if n > u32::MAX as usize - 1 {
+        return Err(Error::invalid(
+            name,
+            format!(
+                "grids of more than {} cells are not supported, got {n}",
+                u32::MAX - 1
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// Labels into `labels` (len `ny·nx`, any prior content) and returns the sums.
+fn run<F: FreeCells>(
+    free: &F,
+    gap: Option<&[f64]>,
+    setup: Setup,
+    stats: bool,
+    strip_rows: usize,
+    labels: &mut [u32],
+) -> Result<Sums> {
+    let (ny, nx) = (setup.ny, setup.nx);
+    if ny == 0 || nx == 0 {
+        return Ok(Sums::default());
+    }
+    with_kept(&GRID, GridBuffers::bytes, |grid| {
+        run_with(free, gap, setup, stats, strip_rows, labels, grid)
+    })
+}
+
+fn run_with<F: FreeCells>(
+    free: &F,
+    gap: Option<&[f64]>,
+    setup: Setup,
+    stats: bool,
+    strip_rows: usize,
+    labels: &mut [u32],
+    grid: &mut GridBuffers,
+) -> Result<Sums> {
+    let (ny, nx) = (setup.ny, setup.nx);
+    let strip_rows = strip_rows.clamp(1, ny);
+    let nw = words(nx);
+    let (chunk, bit_chunk) = (strip_rows * nx, strip_rows * nw);
+    // One bit per cell: a few % of the labels' memory, so the final pass need not read the
+    // source (which may be the gap field, 64 bits per cell) again.
+    // Every word is written before it is read: stale content does not matter.
+    let bits = &mut grid.bits;
+    bits.resize(ny * nw, 0);
+
+    let strips: Vec<Strip> = labels
+        .par_chunks_mut(chunk)
+        .zip(bits.par_chunks_mut(bit_chunk))
+        .enumerate()
+        .map(|(s, (out, b))| {
+            with_kept(&SCRATCH, Scratch::bytes, |scratch| {
+                label_strip_fast(free, gap, &setup, s * strip_rows, out, b, stats, scratch)
+            })
+        })
+        .collect::<Result<_>>()?;
+    let n_strips = strips.len();
+
+    // Strip components get global numbers in raster order: strip by strip.
+    let mut comp_base = Vec::with_capacity(n_strips + 1);
+    let mut total = 0usize;
+    for st in &strips {
+        comp_base.push(total as u32);
+        total += st.n_comp as usize;
+    }
+    comp_base.push(total as u32);
+
+    // Join the strips along their seams, and the last row to the first with axis-0 wrap.
+    let gparent = &mut grid.parent;
+    gparent.clear();
+    gparent.extend(0..total as u32);
+    let (mut above, mut below) = (RowBits::default(), RowBits::default());
+    let region = |s: usize| &labels[s * chunk..((s + 1) * chunk).min(labels.len())];
+    let mut join = |sa: usize, sb: usize| {
+        let (a, b) = (&strips[sa], &strips[sb]);
+        let last_row = (sa * strip_rows + a.rows() - 1) * nw;
+        let first_row = sb * strip_rows * nw;
+        above.load(&bits[last_row..last_row + nw]);
+        below.load(&bits[first_row..first_row + nw]);
+        let ca = a.row_comps(region(sa), a.rows() - 1);
+        let cb = b.row_comps(region(sb), 0);
+        let (ba, bb) = (comp_base[sa], comp_base[sb]);
+        for_each_neighbour(&above, &below, &setup, |i, j| {
+            union(gparent, ba + ca[i as usize], bb + cb[j as usize])
+        });
+    };
+    for s in 1..n_strips {
+        join(s - 1, s);
+    }
+    if setup.periodic.axis0 {
+        join(n_strips - 1, 0);
+    }
+    grid.cluster.resize(total, 0);
+    let cluster = &mut grid.cluster[..total];
+    let n_clusters = number_components(gparent, &mut grid.rank, cluster) as usize;
+    let cluster: &[u32] = cluster;
+
+    labels
+        .par_chunks_mut(chunk)
+        .zip(bits.par_chunks(bit_chunk))
+        .enumerate()
+        .for_each_init(Vec::new, |lab, (s, (out, b))| {
+            let map = &cluster[comp_base[s] as usize..comp_base[s + 1] as usize];
+            finish_strip(&strips[s], out, b, nx, map, lab);
+        });
+
+    let mut sums = Sums {
+        n_clusters,
+        ..Sums::default()
+    };
+    if stats {
+        // Sums in raster order of strip components, whatever the thread count.
+        sums.area = vec![0u64; n_clusters];
+        sums.touch = vec![0u8; n_clusters];
+        for (s, st) in strips.iter().enumerate() {
+            let map = &cluster[comp_base[s] as usize..comp_base[s + 1] as usize];
+            for ((&k, &a), &t) in map.iter().zip(&st.sums.area).zip(&st.sums.touch) {
+                sums.area[k as usize] += a;
+                sums.touch[k as usize] |= t;
+            }
+        }
+        if gap.is_some() {
+            sums.gap_sum = vec![0.0f64; n_clusters];
+            for (s, st) in strips.iter().enumerate() {
+                let map = &cluster[comp_base[s] as usize..comp_base[s + 1] as usize];
+                for (&k, &v) in map.iter().zip(&st.sums.gap_sum) {
+                    sums.gap_sum[k as usize] += v;
+                }
+            }
+        }
+        CompSums::give_back(strips.into_iter().map(|st| st.sums));
+    }
+    Ok(sums)
+}
+
+fn setup(ny: usize, nx: usize, connectivity: Connectivity, periodic: Periodic) -> Setup {
+    Setup {
+        ny,
+        nx,
+        connectivity,
+        periodic,
+    }
+}
+
+/// Labels the free cells of a row-major `ny × nx` mask (`true` = free).
+///
+/// Returns the labels (`0` on non-free cells, `1..=K` in raster order of each cluster's first
+/// cell) and the number of clusters `K`. Runs on the current rayon thread pool.
+pub fn label(
+    free: &[bool],
+    ny: usize,
+    nx: usize,
+    connectivity: Connectivity,
+    periodic: Periodic,
+) -> Result<(Vec<u32>, usize)> {
+    let mut labels = vec![0u32; free.len()];
+    let n = label_into(&FreeMask(free), ny, nx, connectivity, periodic, &mut labels)?;
+    Ok((labels, n))
+}
+
+/// [`label`] for any source of the free mask, into a caller's buffer of `ny·nx` cells (its
+/// prior content is ignored); returns the number of clusters.
+///
+/// Let the caller own the (large) output so that it can come from an allocator that backs it
+/// with huge pages: on some virtual machines, first-touch page faults of 4 KiB pages cost more
+/// than the labelling itself.
+pub fn label_into<F: FreeCells>(
+    free: &F,
+    ny: usize,
+    nx: usize,
+    connectivity: Connectivity,
+    periodic: Periodic,
+    labels: &mut [u32],
+) -> Result<usize> {
+    check_shape("mask", free.len(), ny, nx)?;
+    check_shape("labels", labels.len(), ny, nx)?;
+    let s = setup(ny, nx, connectivity, periodic);
+    let sums = run(free, None, s, false, default_strip_rows(ny, nx), labels)?;
+    Ok(sums.n_clusters)
+}
+
+/// Per-cluster sums of the free region. Cluster `k` (label `k`) is entry `k − 1` of every
+/// per-cluster vector.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Clusters {
+    pub ny: usize,
+    pub nx: usize,
+    pub connectivity: Connectivity,
+    pub periodic: Periodic,
+    pub n_clusters: usize,
+    /// Number of cells of each cluster.
+    pub areas: Vec<u64>,
+    /// `dx² Σ g` over the cells of each cluster (length³).
+    pub volumes: Vec<f64>,
+    /// `TOUCH_*` flags of each cluster.
+    pub touches: Vec<u8>,
+}
+
+/// Labels the free cells given by `free` and sums, per cluster, the cells and the free volume
+/// `dx² Σ g` of the gap field `gap` (row-major, same shape). The gap must be finite everywhere.
+/// Returns the labels (as [`label`]) and the sums.
+pub fn analyze<F: FreeCells>(
+    free: &F,
+    gap: &[f64],
+    ny: usize,
+    nx: usize,
+    dx: f64,
+    connectivity: Connectivity,
+    periodic: Periodic,
+) -> Result<(Vec<u32>, Clusters)> {
+    let mut labels = vec![0u32; free.len()];
+    let c = analyze_into(free, gap, ny, nx, dx, connectivity, periodic, &mut labels)?;
+    Ok((labels, c))
+}
+
+/// [`analyze`] into a caller's label buffer (see [`label_into`]).
+#[allow(clippy::too_many_arguments)]
+pub fn analyze_into<F: FreeCells>(
+    free: &F,
+    gap: &[f64],
+    ny: usize,
+    nx: usize,
+    dx: f64,
+    connectivity: Connectivity,
+    periodic: Periodic,
+    labels: &mut [u32],
+) -> Result<Clusters> {
+    analyze_strips(
+        free,
+        gap,
+        setup(ny, nx, connectivity, periodic),
+        dx,
+        default_strip_rows(ny, nx),
+        labels,
+    )
+}
+
+fn analyze_strips<F: FreeCells>(
+    free: &F,
+    gap: &[f64],
+    setup: Setup,
+    dx: f64,
+    strip_rows: usize,
+    labels: &mut [u32],
+) -> Result<Clusters> {
+    let (ny, nx) = (setup.ny, setup.nx);
+    check_shape("mask", free.len(), ny, nx)?;
+    check_shape("gap", gap.len(), ny, nx)?;
+    check_shape("labels", labels.len(), ny, nx)?;
+    if !(dx.is_finite() && dx > 0.0) {
+        return Err(Error::invalid(
+            "dx",
+            format!("must be a positive finite grid spacing, got {dx}"),
+        ));
+    }
+    let sums = run(free, Some(gap), setup, true, strip_rows, labels)?;
+    let cell = dx * dx;
+    let mut volumes = sums.gap_sum;
+    for v in &mut volumes {
+        *v *= cell;
+    }
+    Ok(Clusters {
+        ny,
+        nx,
+        connectivity: setup.connectivity,
+        periodic: setup.periodic,
+        n_clusters: sums.n_clusters,
+        areas: sums.area,
+        volumes,
+        touches: sums.touch,
+    })
+}
+
+/// Neumaier's compensated sum: exact to a few ulps of the result for sums of like-signed terms.
+#[derive(Clone, Copy, Default)]
+struct Compensated {
+    sum: f64,
+    c: f64,
+}
+
+impl Compensated {
+    fn add(&mut self, v: f64) {
+        let t = self.sum + v;
+        if self.sum.abs() >= v.abs() {
+            self.c += (self.sum - t) + v;
+        } else {
+            self.c += (v - t) + self.sum;
+        }
+        self.sum = t;
+    }
+    fn value(self) -> f64 {
+        self.sum + self.c
+    }
+}
+
+/// Percolation classes of the clusters and the class totals.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Classification {
+    pub flow: Flow,
+    /// `SPANNING`, `DEAD_END` or `TRAPPED` per cluster (entry `k − 1` for label `k`).
+    pub classes: Vec<u8>,
+    /// Volumes (length³) of spanning (`V_pg`), dead-end and trapped clusters, and of all free
+    /// cells; each is a compensated sum over clusters, so the three add up to `free_volume` to
+    /// within a few ulps.
+    pub spanning_volume: f64,
+    pub dead_end_volume: f64,
+    pub trapped_volume: f64,
+    pub free_volume: f64,
+    /// Cell counts of the same sets.
+    pub spanning_area: u64,
+    pub dead_end_area: u64,
+    pub trapped_area: u64,
+    pub free_area: u64,
+    pub n_spanning: usize,
+    pub n_dead_end: usize,
+    pub n_trapped: usize,
+}
+
+/// Class of a cluster with touch flags `t` (see the module docs).
+pub fn class_of(t: u8, flow: Flow, periodic: Periodic) -> u8 {
+    let rows = TOUCH_FIRST_ROW | TOUCH_LAST_ROW;
+    let cols = TOUCH_FIRST_COL | TOUCH_LAST_COL;
+    // A wrapped axis has no boundary.
+    let boundary =
+        (if periodic.axis0 { 0 } else { rows }) | (if periodic.axis1 { 0 } else { cols });
+    let span0 = !periodic.axis0 && t & rows == rows;
+    let span1 = !periodic.axis1 && t & cols == cols;
+    let spans = match flow {
+        Flow::Axis0 => span0,
+        Flow::Axis1 => span1,
+        Flow::Either => span0 || span1,
+        Flow::Both => span0 && span1,
+    };
+    if spans {
+        SPANNING
+    } else if t & boundary != 0 {
+        DEAD_END
+    } else {
+        TRAPPED
+    }
+}
+
+/// Classifies the clusters for flow along `flow` (see the module docs).
+pub fn classify(clusters: &Clusters, flow: Flow) -> Result<Classification> {
+    flow.check_periodic(clusters.periodic)?;
+    let classes: Vec<u8> = clusters
+        .touches
+        .iter()
+        .map(|&t| class_of(t, flow, clusters.periodic))
+        .collect();
+    let mut vol = [Compensated::default(); 4];
+    let mut area = [0u64; 4];
+    let mut count = [0usize; 4];
+    let mut total = Compensated::default();
+    for ((&c, &v), &a) in classes.iter().zip(&clusters.volumes).zip(&clusters.areas) {
+        vol[c as usize].add(v);
+        area[c as usize] += a;
+        count[c as usize] += 1;
+        total.add(v);
+    }
+    let s = SPANNING as usize;
+    let d = DEAD_END as usize;
+    let t = TRAPPED as usize;
+    Ok(Classification {
+        flow,
+        classes,
+        spanning_volume: vol[s].value(),
+        dead_end_volume: vol[d].value(),
+        trapped_volume: vol[t].value(),
+        free_volume: total.value(),
+        spanning_area: area[s],
+        dead_end_area: area[d],
+        trapped_area: area[t],
+        free_area: area[s] + area[d] + area[t],
+        n_spanning: count[s],
+        n_dead_end: count[d],
+        n_trapped: count[t],
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    /// Small deterministic generator for test masks (xorshift64*).
+    struct Rng(u64);
+    impl Rng {
+        fn next(&mut self) -> u64 {
+            self.0 ^= self.0 >> 12;
+            self.0 ^= self.0 << 25;
+            self.0 ^= self.0 >> 27;
+            self.0.wrapping_mul(0x2545_f491_4f6c_dd1d)
+        }
+        fn unit(&mut self) -> f64 {
+            (self.next() >> 11) as f64 / (1u64 << 53) as f64
+        }
+    }
+
+    fn random_mask(ny: usize, nx: usize, p: f64, seed: u64) -> Vec<bool> {
+        let mut rng = Rng(seed.wrapping_mul(0x9e37_79b9_7f4a_7c15) | 1);
+        (0..ny * nx).map(|_| rng.unit() < p).collect()
+    }
+
+    /// Breadth-first reference labelling, clusters numbered in raster order of first cell.
+    fn bfs_labels(
+        free: &[bool],
+        ny: usize,
+        nx: usize,
+        conn: Connectivity,
+        per: Periodic,
+    ) -> (Vec<u32>, usize) {
+        let mut lab = vec![0u32; ny * nx];
+        let mut k = 0u32;
+        let mut offs = vec![(-1i64, 0i64), (1, 0), (0, -1), (0, 1)];
+        if conn == Connectivity::Eight {
+            offs.extend([(-1, -1), (-1, 1), (1, -1), (1, 1)]);
+        }
+        let mut stack = Vec::new();
+        for start in 0..ny * nx {
+            if !free[start] || lab[start] != 0 {
+                continue;
+            }
+            k += 1;
+            lab[start] = k;
+            stack.push(start);
+            while let Some(c) = stack.pop() {
+                let (i, j) = ((c / nx) as i64, (c % nx) as i64);
+                for &(di, dj) in &offs {
+                    let (mut a, mut b) = (i + di, j + dj);
+                    if per.axis0 {
+                        a = a.rem_euclid(ny as i64);
+                    }
+                    if per.axis1 {
+                        b = b.rem_euclid(nx as i64);
+                    }
+                    if a < 0 || b < 0 || a >= ny as i64 || b >= nx as i64 {
+                        continue;
+                    }
+                    let n = a as usize * nx + b as usize;
+                    if free[n] && lab[n] == 0 {
+                        lab[n] = k;
+                        stack.push(n);
+                    }
+                }
+            }
+        }
+        (lab, k as usize)
+    }
+
+    fn label_strips(
+        free: &[bool],
+        ny: usize,
+        nx: usize,
+        conn: Connectivity,
+        per: Periodic,
+        strip_rows: usize,
+    ) -> (Vec<u32>, usize) {
+        // Stale content in the buffer must not matter.
+        let mut labels = vec![7u32; ny * nx];
+        let sums = run(
+            &FreeMask(free),
+            None,
+            setup(ny, nx, conn, per),
+            false,
+            strip_rows,
+            &mut labels,
+        )
+        .unwrap();
+        (labels, sums.n_clusters)
+    }
+
+    fn parse(rows: &[&str]) -> (Vec<bool>, usize, usize) {
+        let ny = rows.len();
+        let nx = rows[0].len();
+        let free = rows
+            .iter()
+            .flat_map(|r| r.chars().map(|c| c == '.'))
+            .collect();
+        (free, ny, nx)
+    }
+
+    fn classify_rows(rows: &[&str], conn: Connectivity, per: Periodic, flow: Flow) -> Vec<u8> {
+        let (free, ny, nx) = parse(rows);
+        let gap = vec![1.0; ny * nx];
+        let (_, c) = analyze(&FreeMask(&free), &gap, ny, nx, 1.0, conn, per).unwrap();
+        classify(&c, flow).unwrap().classes
+    }
+
+    #[test]
+    fn clusters_pack_bools_matches_bytewise() {
+        for seed in 0..50 {
+            let m = random_mask(1, 64, 0.5, seed);
+            for len in [1, 7, 8, 9, 63, 64] {
+                let want = m[..len]
+                    .iter()
+                    .enumerate()
+                    .fold(0u64, |b, (k, &x)| b | (x as u64) << k);
+                assert_eq!(pack_bools(&m[..len]), want);
+            }
+        }
+    }
+
+    #[test]
+    fn clusters_hand_made_shapes() {
+        let four = Connectivity::Four;
+        let none = Periodic::default();
+        // Straight channel along axis 0 spans; the pocket is trapped.
+        let c = classify_rows(
+            &["#.###", "#.#.#", "#.###", "#.###"],
+            four,
+            none,
+            Flow::Axis0,
+        );
+        assert_eq!(c, vec![SPANNING, TRAPPED]);
+        // Blocked channel: two dead ends.
+        let c = classify_rows(&["#.#", "#.#", "###", "#.#"], four, none, Flow::Axis0);
+        assert_eq!(c, vec![DEAD_END, DEAD_END]);
+        // Touches one side only.
+        let c = classify_rows(&["###", "..#", "###"], four, none, Flow::Axis0);
+        assert_eq!(c, vec![DEAD_END]);
+        // Diagonal connection: one cluster with 8, two with 4.
+        let (free, ny, nx) = parse(&[".#", "#."]);
+        assert_eq!(label(&free, ny, nx, four, none).unwrap().1, 2);
+        assert_eq!(
+            label(&free, ny, nx, Connectivity::Eight, none).unwrap(),
+            (vec![1, 0, 0, 1], 1)
+        );
+    }
+
+    #[test]
+    fn clusters_periodic_wrap_changes_class() {
+        let four = Connectivity::Four;
+        // A channel that leaves at the right edge and re-enters at the left one.
+        let rows = ["###.#", ".##..", ".####", ".####"];
+        let (free, ny, nx) = parse(&rows);
+        let wrap1 = Periodic {
+            axis0: false,
+            axis1: true,
+        };
+        assert_eq!(
+            label(&free, ny, nx, four, Periodic::default()).unwrap().1,
+            2
+        );
+        assert_eq!(
+            classify_rows(&rows, four, Periodic::default(), Flow::Axis0),
+            vec![DEAD_END, DEAD_END]
+        );
+        assert_eq!(label(&free, ny, nx, four, wrap1).unwrap().1, 1);
+        assert_eq!(
+            classify_rows(&rows, four, wrap1, Flow::Axis0),
+            vec![SPANNING]
+        );
+        // Touching the wrapped edges only is not touching a boundary.
+        let pocket = ["#####", "..#..", "#####"];
+        assert_eq!(
+            classify_rows(&pocket, four, wrap1, Flow::Axis0),
+            vec![TRAPPED]
+        );
+        assert_eq!(
+            classify_rows(&pocket, four, Periodic::default(), Flow::Axis0),
+            vec![DEAD_END, DEAD_END]
+        );
+    }
+
+    #[test]
+    fn clusters_either_and_both() {
+        let four = Connectivity::Four;
+        let none = Periodic::default();
+        let cross = ["#.#", "...", "#.#"];
+        let line = ["###", "...", "###"];
+        assert_eq!(
+            classify_rows(&cross, four, none, Flow::Both),
+            vec![SPANNING]
+        );
+        assert_eq!(classify_rows(&line, four, none, Flow::Both), vec![DEAD_END]);
+        assert_eq!(
+            classify_rows(&line, four, none, Flow::Either),
+            vec![SPANNING]
+        );
+        assert_eq!(
+            classify_rows(&line, four, none, Flow::Axis0),
+            vec![DEAD_END]
+        );
+    }
+
+    #[test]
+    fn clusters_bad_arguments_are_errors() {
+        let m = vec![true; 6];
+        let none = Periodic::default();
+        let four = Connectivity::Four;
+        let e = label(&m, 2, 4, four, none).unwrap_err();
+        assert!(matches!(e, Error::InvalidArgument { name: "mask", .. }));
+        let e = Connectivity::from_neighbours(6).unwrap_err();
+        assert!(matches!(
+            e,
+            Error::InvalidArgument {
+                name: "connectivity",
+                ..
+            }
+        ));
+        let e = Flow::parse("2").unwrap_err();
+        assert!(matches!(e, Error::InvalidArgument { name: "flow", .. }));
+        let mut g = vec![1.0; 6];
+        let e = analyze(&FreeMask(&m), &g, 2, 3, 0.0, four, none).unwrap_err();
+        assert!(matches!(e, Error::InvalidArgument { name: "dx", .. }));
+        let e = analyze(&FreeMask(&m), &g[..5], 2, 3, 1.0, four, none).unwrap_err();
+        assert!(matches!(e, Error::InvalidArgument { name: "gap", .. }));
+        g[4] = f64::NAN;
+        let e = analyze(&FreeMask(&m), &g, 2, 3, 1.0, four, none).unwrap_err();
+        assert!(matches!(e, Error::InvalidArgument { name: "gap", .. }));
+        let wrap0 = Periodic {
+            axis0: true,
+            axis1: false,
+        };
+        let (_, c) = analyze(&FreeMask(&m), &[1.0; 6], 2, 3, 1.0, four, wrap0).unwrap();
+        let e = classify(&c, Flow::Axis0).unwrap_err();
+        assert!(matches!(
+            e,
+            Error::InvalidArgument {
+                name: "periodic_axis0",
+                ..
+            }
+        ));
+        assert!(classify(&c, Flow::Axis1).is_ok());
+        assert!(classify(&c, Flow::Either).is_err());
+    }
+
+    #[test]
+    fn clusters_empty_and_degenerate_grids() {
+        let four = Connectivity::Four;
+        let none = Periodic::default();
+        assert_eq!(label(&[], 0, 5, four, none).unwrap(), (vec![], 0));
+        assert_eq!(label(&[true], 1, 1, four, none).unwrap(), (vec![1], 1));
+        let all = Periodic {
+            axis0: true,
+            axis1: true,
+        };
+        assert_eq!(
+            label(&[true], 1, 1, Connectivity::Eight, all).unwrap(),
+            (vec![1], 1)
+        );
+        // One row, one column: the cluster touches both ends along its length.
+        assert_eq!(
+            classify_rows(&["..."], four, none, Flow::Axis0),
+            vec![SPANNING]
+        );
+    }
+
+    #[test]
+    fn clusters_same_result_on_one_and_two_threads() {
+        let (ny, nx) = (517, 389);
+        let free = random_mask(ny, nx, 0.6, 7);
+        let mut rng = Rng(99);
+        let gap: Vec<f64> = (0..ny * nx).map(|_| rng.unit()).collect();
+        let per = Periodic {
+            axis0: false,
+            axis1: true,
+        };
+        let go = |threads: usize| {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            pool.install(|| {
+                let mut labels = vec![0u32; ny * nx];
+                let s = setup(ny, nx, Connectivity::Four, per);
+                let c = analyze_strips(&FreeMask(&free), &gap, s, 0.5, 16, &mut labels).unwrap();
+                (labels, c)
+            })
+        };
+        let (a, b) = (go(1), go(2));
+        assert_eq!(a, b);
+        let bits = |c: &Clusters| c.volumes.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&a.1), bits(&b.1));
+        assert_eq!(a.0, bfs_labels(&free, ny, nx, Connectivity::Four, per).0);
+    }
+
+    #[test]
+    fn clusters_sources_agree() {
+        let (ny, nx) = (33, 150);
+        let mut rng = Rng(5);
+        let gap: Vec<f64> = (0..ny * nx).map(|_| rng.unit() - 0.4).collect();
+        let free: Vec<bool> = gap.iter().map(|&g| g > 0.0).collect();
+        let contact: Vec<bool> = free.iter().map(|&f| !f).collect();
+        let c4 = Connectivity::Four;
+        let none = Periodic::default();
+        let go = |src: &dyn Fn(&mut [u32]) -> Result<usize>| {
+            let mut labels = vec![0u32; ny * nx];
+            let n = src(&mut labels).unwrap();
+            (labels, n)
+        };
+        let a = go(&|l| label_into(&FreeMask(&free), ny, nx, c4, none, l));
+        let b = go(&|l| label_into(&ContactMask(&contact), ny, nx, c4, none, l));
+        let c = go(&|l| label_into(&PositiveGap(&gap), ny, nx, c4, none, l));
+        assert_eq!(a, b);
+        assert_eq!(a, c);
+    }
+
+    fn arb_case() -> impl Strategy<Value = (usize, usize, f64, u64, bool, bool, bool, usize)> {
+        (
+            1usize..48,
+            1usize..140,
+            0.2f64..0.9,
+            any::<u64>(),
+            any::<bool>(),
+            any::<bool>(),
+            any::<bool>(),
+            1usize..12,
+        )
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(400))]
+
+        /// Labels equal a breadth-first search numbered in raster order, for any strip height.
+        #[test]
+        fn clusters_match_bfs((ny, nx, p, seed, eight, w0, w1, strip) in arb_case()) {
+            let free = random_mask(ny, nx, p, seed);
+            let conn = if eight { Connectivity::Eight } else { Connectivity::Four };
+            let per = Periodic { axis0: w0, axis1: w1 };
+            let want = bfs_labels(&free, ny, nx, conn, per);
+            prop_assert_eq!(label_strips(&free, ny, nx, conn, per, strip), want.clone());
+            prop_assert_eq!(label(&free, ny, nx, conn, per).unwrap(), want);
+        }
+
+        /// Per-cluster sums equal direct sums over the labels; class volumes add up to the
+        /// free volume.
+        #[test]
+        fn clusters_sums_and_classes((ny, nx, p, seed, eight, w0, w1, strip) in arb_case()) {
+            let free = random_mask(ny, nx, p, seed);
+            let mut rng = Rng(seed | 1);
+            let gap: Vec<f64> = (0..ny * nx).map(|_| rng.unit() * 10.0).collect();
+            let conn = if eight { Connectivity::Eight } else { Connectivity::Four };
+            // Wrap across the flow axis only (axis 0 when w0, else axis 1).
+            let (per, flow) = match (w0, w1) {
+                (true, _) => (Periodic { axis0: true, axis1: false }, Flow::Axis1),
+                (false, true) => (Periodic { axis0: false, axis1: true }, Flow::Axis0),
+                (false, false) => (Periodic::default(), if eight { Flow::Either } else { Flow::Both }),
+            };
+            let dx = 0.3;
+            let mut labels = vec![0u32; ny * nx];
+            let s = setup(ny, nx, conn, per);
+            let c = analyze_strips(&FreeMask(&free), &gap, s, dx, strip, &mut labels).unwrap();
+            let k = c.n_clusters;
+            let mut area = vec![0u64; k];
+            let mut vol = vec![0.0f64; k];
+            let mut touch = vec![0u8; k];
+            for i in 0..ny {
+                for j in 0..nx {
+                    let l = labels[i * nx + j] as usize;
+                    if l == 0 { continue; }
+                    area[l - 1] += 1;
+                    vol[l - 1] += gap[i * nx + j] * dx * dx;
+                    touch[l - 1] |= if i == 0 { TOUCH_FIRST_ROW } else { 0 }
+                        | if i + 1 == ny { TOUCH_LAST_ROW } else { 0 }
+                        | if j == 0 { TOUCH_FIRST_COL } else { 0 }
+                        | if j + 1 == nx { TOUCH_LAST_COL } else { 0 };
+                }
+            }
+            prop_assert_eq!(&c.areas, &area);
+            prop_assert_eq!(&c.touches, &touch);
+            for (a, b) in c.volumes.iter().zip(&vol) {
+                prop_assert!((a - b).abs() <= 1e-12 * b.abs().max(1.0));
+            }
+            let cl = classify(&c, flow).unwrap();
+            let parts = cl.spanning_volume + cl.dead_end_volume + cl.trapped_volume;
+            prop_assert!((parts - cl.free_volume).abs() <= 1e-12 * cl.free_volume.max(1e-300));
+            let direct: f64 = free.iter().zip(&gap).filter(|(f, _)| **f).map(|(_, g)| g * dx * dx).sum();
+            prop_assert!((cl.free_volume - direct).abs() <= 1e-12 * direct.max(1.0));
+            prop_assert_eq!(cl.free_area, free.iter().filter(|f| **f).count() as u64);
+            prop_assert_eq!(cl.n_spanning + cl.n_dead_end + cl.n_trapped, k);
+        }
+    }
+}
