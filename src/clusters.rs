@@ -25,10 +25,13 @@
 //!   so one pass in index order numbers the components in raster order.
 //!
 //! The strips are then joined along their seams (and the periodic wraps) by a second, small
-//! union–find over the strip components, and every row of the output is written once, cell
-//! by cell without data-dependent branches (random masks make branches mispredict).
-//! Nothing is allocated per row; the only per-cell buffer besides the output is one bit per
-//! cell.
+//! union–find over the strip components, and every row of the output is written, cell by
+//! cell without data-dependent branches (random masks make branches mispredict).
+//!
+//! Memory: nothing is allocated per row; besides the output the only per-cell buffer is one
+//! bit per cell; the runs' components wait in the output array itself until it is written.
+//! Work buffers are kept per thread between calls (up to `KEEP_BYTES`): on virtual machines a
+//! fresh buffer's first-touch page faults cost a good part of the labelling time.
 //!
 //! Per-cluster sums (area, free volume) are accumulated per run, then per strip component,
 //! then per cluster, always in raster order over a partition that does not depend on the
@@ -471,9 +474,6 @@ struct Scratch {
     run_gap: Vec<f64>,
     /// Runs on the grid's edges and the edges they touch (with sums only).
     edge: Vec<(u32, u8)>,
-    /// Run starts and ends of one row (with sums only).
-    starts: Vec<u32>,
-    ends: Vec<u32>,
 }
 
 /// Buffers of the whole grid used while labelling it: the free bits, and the union–find over
@@ -642,8 +642,6 @@ fn label_strip<F: FreeCells>(
         run_len,
         run_gap,
         edge,
-        starts,
-        ends,
     } = scratch;
     parent.clear();
     run_len.clear();
@@ -688,31 +686,27 @@ fn label_strip<F: FreeCells>(
         row_runs.push(base + cur.runs);
 
         if stats {
-            // Run starts and ends (one past the last cell) from the masks, then the runs; no
-            // branch depends on the data but the loops' lengths.
-            starts.clear();
-            ends.clear();
-            for (k, (&b, &st)) in cur.bits.iter().zip(&cur.starts).enumerate() {
+            // Each run end (one past its last cell) is met in order and paired with the next
+            // run start; both come from the bit masks, so no branch depends on the cells but
+            // the loops over set bits.
+            let (mut sk, mut sw) = (0usize, cur.starts.first().copied().unwrap_or(0));
+            for (k, &b) in cur.bits.iter().enumerate() {
                 let next = cur.bits.get(k + 1).map_or(0, |&n| n & 1);
-                let (mut st, mut en) = (st, b & !((b >> 1) | (next << 63)));
-                let base = (64 * k) as u32;
-                while st != 0 {
-                    starts.push(base + st.trailing_zeros());
-                    st &= st - 1;
-                }
+                let mut en = b & !((b >> 1) | (next << 63));
                 while en != 0 {
-                    ends.push(base + en.trailing_zeros() + 1);
+                    let e = 64 * k + en.trailing_zeros() as usize + 1;
                     en &= en - 1;
+                    while sw == 0 {
+                        sk += 1;
+                        sw = cur.starts[sk];
+                    }
+                    let s = 64 * sk + sw.trailing_zeros() as usize;
+                    sw &= sw - 1;
+                    run_len.push((e - s) as u32);
+                    if let Some(row) = g_row {
+                        run_gap.push(run_sum(row, s, e));
+                    }
                 }
-            }
-            run_len.extend(starts.iter().zip(ends.iter()).map(|(&s, &e)| e - s));
-            if let Some(row) = g_row {
-                run_gap.extend(
-                    starts
-                        .iter()
-                        .zip(ends.iter())
-                        .map(|(&s, &e)| run_sum(row, s as usize, e as usize)),
-                );
             }
             // Only runs on the grid's edges touch it: at most two per row, besides the first
             // and the last row.
@@ -835,6 +829,27 @@ fn finish_strip(
     }
 }
 
+/// One strip component's sums.
+#[derive(Clone, Copy)]
+struct CompSum {
+    area: u64,
+    gap: f64,
+    touch: u8,
+}
+
+/// Splits `v` into the consecutive pieces `v[bounds[i]..bounds[i + 1]]` (`bounds` is
+/// non-decreasing, starts at 0 and ends at `v.len()`).
+fn split_at<'a, T>(v: &'a mut [T], bounds: &[usize]) -> Vec<&'a mut [T]> {
+    let mut rest = v;
+    let mut pieces = Vec::with_capacity(bounds.len().saturating_sub(1));
+    for w in bounds.windows(2) {
+        let (piece, tail) = std::mem::take(&mut rest).split_at_mut(w[1] - w[0]);
+        pieces.push(piece);
+        rest = tail;
+    }
+    pieces
+}
+
 /// Strip height used for a grid: strips of at least ~32k cells so that a strip's work
 /// outweighs its seam, and at most 128 strips. It depends on the grid only, never on the
 /// thread count, so per-cluster sums are reproducible.
@@ -855,27 +870,27 @@ struct Sums {
     touch: Vec<u8>,
 }
 
-fn check_shape(name: &'static str, len: usize, ny: usize, nx: usize) -> Result<()> {
-    let n = ny.checked_mul(nx).ok_or_else(|| {
-        Error::invalid(
+/// Checks that a `ny × nx` grid is supported (cell positions, run and component indices and
+/// labels are `u32`); `name` is the argument reported in the error.
+pub fn check_grid(name: &'static str, ny: usize, nx: usize) -> Result<usize> {
+    match ny.checked_mul(nx) {
+        Some(n) if n < u32::MAX as usize => Ok(n),
+        _ => Err(Error::invalid(
             name,
-            format!("shape ({ny}, {nx}) overflows the address space"),
-        )
-    })?;
+            format!(
+                "grids of more than {} cells are not supported, got shape ({ny}, {nx})",
+                u32::MAX - 1
+            ),
+        )),
+    }
+}
+
+fn check_shape(name: &'static str, len: usize, ny: usize, nx: usize) -> Result<()> {
+    let n = check_grid(name, ny, nx)?;
     if len != n {
         return Err(Error::invalid(
             name,
             format!("has {len} cells, but the shape ({ny}, {nx}) needs {n}"),
-        ));
-    }
-    // Cell positions, run and component indices and labels are u32.
-    if n > u32::MAX as usize - 1 {
-        return Err(Error::invalid(
-            name,
-            format!(
-                "grids of more than {} cells are not supported, got {n}",
-                u32::MAX - 1
-            ),
         ));
     }
     Ok(())
@@ -983,23 +998,63 @@ fn run_with<F: FreeCells>(
         ..Sums::default()
     };
     if stats {
-        // Sums in raster order of strip components, whatever the thread count.
+        // A cluster's sums add its strip components in raster order, whatever the thread
+        // count. Clusters are numbered in order of their first component, so those starting
+        // in strip s are a contiguous range `first[s]..first[s + 1]`, summed by the thread
+        // of strip s; components joining a cluster begun in an earlier strip are added after,
+        // strip by strip, which keeps the raster order.
+        let first: Vec<usize> = (0..=n_strips)
+            .map(|s| match comp_base[s] as usize {
+                c if c < total => grid.rank[c] as usize,
+                _ => n_clusters,
+            })
+            .collect();
         sums.area = vec![0u64; n_clusters];
         sums.touch = vec![0u8; n_clusters];
-        for (s, st) in strips.iter().enumerate() {
-            let map = &cluster[comp_base[s] as usize..comp_base[s + 1] as usize];
-            for ((&k, &a), &t) in map.iter().zip(&st.sums.area).zip(&st.sums.touch) {
-                sums.area[k as usize] += a;
-                sums.touch[k as usize] |= t;
-            }
-        }
-        if gap.is_some() {
-            sums.gap_sum = vec![0.0f64; n_clusters];
-            for (s, st) in strips.iter().enumerate() {
+        sums.gap_sum = vec![0.0f64; if gap.is_some() { n_clusters } else { 0 }];
+        let with_gap = gap.is_some();
+        let area = split_at(&mut sums.area, &first);
+        let touch = split_at(&mut sums.touch, &first);
+        let mut gap_sum = if with_gap {
+            split_at(&mut sums.gap_sum, &first)
+        } else {
+            (0..n_strips).map(|_| &mut [][..]).collect()
+        };
+        let late: Vec<Vec<(u32, CompSum)>> = strips
+            .par_iter()
+            .zip(area)
+            .zip(touch)
+            .zip(gap_sum.par_iter_mut())
+            .enumerate()
+            .map(|(s, (((st, area), touch), gap_sum))| {
                 let map = &cluster[comp_base[s] as usize..comp_base[s + 1] as usize];
-                for (&k, &v) in map.iter().zip(&st.sums.gap_sum) {
-                    sums.gap_sum[k as usize] += v;
+                let mut late = Vec::new();
+                for (c, &k) in map.iter().enumerate() {
+                    let v = CompSum {
+                        area: st.sums.area[c],
+                        gap: if with_gap { st.sums.gap_sum[c] } else { 0.0 },
+                        touch: st.sums.touch[c],
+                    };
+                    match (k as usize).checked_sub(first[s]) {
+                        Some(i) => {
+                            area[i] += v.area;
+                            touch[i] |= v.touch;
+                            if with_gap {
+                                gap_sum[i] += v.gap;
+                            }
+                        }
+                        None => late.push((k, v)),
+                    }
                 }
+                late
+            })
+            .collect();
+        for (k, v) in late.into_iter().flatten() {
+            let k = k as usize;
+            sums.area[k] += v.area;
+            sums.touch[k] |= v.touch;
+            if with_gap {
+                sums.gap_sum[k] += v.gap;
             }
         }
         CompSums::give_back(strips.into_iter().map(|st| st.sums));

@@ -38,6 +38,16 @@ use crate::operator::Operator;
 
 const NOT_IN_P: usize = usize::MAX;
 
+/// Threads for a dense kernel of about `work` multiply-adds: below ~1/4 M the cost of waking
+/// a second thread exceeds the gain (small grids do hundreds of such calls per solve).
+fn par_for(work: usize) -> Par {
+    if work < (1 << 18) {
+        Par::Seq
+    } else {
+        Par::rayon(0)
+    }
+}
+
 /// How many free points enter the passive set per outer iteration.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Pivoting {
@@ -150,7 +160,7 @@ impl Factor {
         let mut r = kernel.cross_block(&self.idx, new);
         if k > 0 {
             let rm = MatMut::from_column_major_slice_mut(&mut r, k, nb);
-            solve_lower_triangular_in_place(self.lower(k), rm, Par::rayon(0));
+            solve_lower_triangular_in_place(self.lower(k), rm, par_for(k * nb));
         }
         let mut s = Mat::<f64>::zeros(nb, nb);
         s.par_col_chunks_mut(1)
@@ -168,7 +178,7 @@ impl Factor {
                 rr.transpose(),
                 rr,
                 -1.0,
-                Par::rayon(0),
+                par_for(k * nb),
             );
         }
         self.write_tail(k, new, &r, &s)?;
@@ -325,12 +335,12 @@ impl Factor {
         solve_lower_triangular_in_place(
             l,
             MatMut::from_column_major_slice_mut(&mut *rhs, k, 1),
-            Par::rayon(0),
+            par_for(k * k / 64),
         );
         solve_upper_triangular_in_place(
             l.transpose(),
             MatMut::from_column_major_slice_mut(rhs, k, 1),
-            Par::rayon(0),
+            par_for(k * k / 64),
         );
     }
 }

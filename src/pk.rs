@@ -168,7 +168,7 @@ pub struct Options<'a> {
     /// Refuse up front with [`Error::TooLarge`] when [`memory_estimate`] exceeds this (bytes).
     pub memory_limit: Option<u64>,
     /// Polled every ~10 iterations (and at least every 0.25 s); `true` → [`Error::Interrupted`].
-    pub should_stop: Option<&'a dyn Fn() -> bool>,
+    pub should_stop: Option<&'a (dyn Fn() -> bool + Sync)>,
 }
 
 impl Default for Options<'_> {
@@ -1287,7 +1287,6 @@ fn run(op: &Operator, problem: &Problem, control: Control, opts: &Options) -> Re
 mod tests {
     use super::*;
     use crate::operator::dense_apply;
-    use std::cell::Cell;
     use std::f64::consts::PI;
 
     fn lcg(seed: u64, n: usize) -> Vec<f64> {
@@ -1765,9 +1764,9 @@ mod tests {
             }
             other => panic!("{other:?}"),
         }
-        let calls = Cell::new(0);
+        let calls = std::sync::atomic::AtomicUsize::new(0);
         let stop = || {
-            calls.set(calls.get() + 1);
+            calls.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
             true
         };
         let interrupt = Options {
@@ -1778,7 +1777,7 @@ mod tests {
             solve(&pr, Control::Approach(0.3), &interrupt).unwrap_err(),
             Error::Interrupted
         );
-        assert_eq!(calls.get(), 1);
+        assert_eq!(calls.load(std::sync::atomic::Ordering::Relaxed), 1);
     }
 
     #[test]

@@ -119,6 +119,16 @@ mod clusters_py {
         Ok(pool.install(f))
     }
 
+    /// A zeroed `uint32` array from `numpy.zeros`: numpy backs large arrays with huge pages
+    /// (saving thousands of first-touch page faults, see `clusters::label_into`), and a
+    /// failed allocation raises `MemoryError` instead of panicking.
+    fn zeros_u32(py: Python<'_>, ny: usize, nx: usize) -> PyResult<Bound<'_, PyArray2<u32>>> {
+        let arr = py
+            .import("numpy")?
+            .call_method1("zeros", ((ny, nx), "uint32"))?;
+        Ok(arr.cast_into::<PyArray2<u32>>()?)
+    }
+
     fn periodic(axis0: bool, axis1: bool) -> Periodic {
         Periodic { axis0, axis1 }
     }
@@ -139,12 +149,11 @@ mod clusters_py {
         let conn = Connectivity::from_neighbours(connectivity).map_err(to_py)?;
         let threads = check_threads(threads)?;
         let [ny, nx] = [free.shape()[0], free.shape()[1]];
+        clusters::check_grid("free", ny, nx).map_err(to_py)?;
         let cells = row_major(&free);
         let cells: &[bool] = &cells;
         let per = periodic(periodic_axis0, periodic_axis1);
-        // numpy allocates the labels: it backs large arrays with huge pages, which saves
-        // thousands of first-touch page faults (see clusters::label_into).
-        let labels = PyArray2::<u32>::zeros(py, [ny, nx], false);
+        let labels = zeros_u32(py, ny, nx)?;
         let n = {
             let mut rw = labels.readwrite();
             let out = rw.as_slice_mut()?;
@@ -184,6 +193,7 @@ mod clusters_py {
         flow.check_periodic(per).map_err(to_py)?;
         let threads = check_threads(threads)?;
         let [ny, nx] = [gap.shape()[0], gap.shape()[1]];
+        clusters::check_grid("gap", ny, nx).map_err(to_py)?;
         if let Some(c) = &contact {
             if c.shape() != gap.shape() {
                 return Err(to_py(Error::invalid(
@@ -200,7 +210,7 @@ mod clusters_py {
         let g: &[f64] = &g;
         let c = contact.as_ref().map(row_major);
         let c: Option<&[bool]> = c.as_deref();
-        let labels = PyArray2::<u32>::zeros(py, [ny, nx], false);
+        let labels = zeros_u32(py, ny, nx)?;
         let (cl, class) = {
             let mut rw = labels.readwrite();
             let out = rw.as_slice_mut()?;
@@ -493,7 +503,9 @@ mod contact_py {
                     (_, Some(s)) => Start::Set(s),
                     _ => Start::Cold,
                 };
-                lh.solve(approach, start, &opts, &should_stop)
+                // Run on a pool thread: the many small parallel loops of a solve then fork
+                // from inside the pool instead of each being injected from outside.
+                rayon::scope(|_| lh.solve(approach, start, &opts, &should_stop))
             });
             let sol = result.map_err(to_py)?;
             let seconds = t0.elapsed().as_secs_f64();
@@ -629,7 +641,9 @@ mod pk_py {
                 memory_limit: Some(memory_limit),
                 should_stop: Some(&stop),
             };
-            catch_unwind(AssertUnwindSafe(|| pk::solve(&problem, control, &opts)))
+            catch_unwind(AssertUnwindSafe(|| {
+                rayon::scope(|_| pk::solve(&problem, control, &opts))
+            }))
         });
         let seconds = start.elapsed().as_secs_f64();
         let sol = match outcome {
