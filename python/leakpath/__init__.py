@@ -9,13 +9,22 @@ from ._core import __version__
 from ._core import kernel_table as _kernel_table
 from .contact import ContactProblem, ContactState, solve
 from .moments import Moments, nayak_moments, rms_height, rms_slope
+from .percolation import Percolation, percolation
 from .surfaces import Surface, load, rmd, spectral
+from .sweep import SweepResult, sweep
+from .threshold import PercolationThreshold, percolation_threshold
 
 __all__ = [
     "__version__",
     "ContactProblem",
     "ContactState",
     "Moments",
+    "Percolation",
+    "PercolationThreshold",
+    "SweepResult",
+    "percolation",
+    "percolation_threshold",
+    "sweep",
     "rms_height",
     "rms_slope",
     "solve",
