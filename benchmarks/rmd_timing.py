@@ -23,8 +23,9 @@ import sys
 import time
 from pathlib import Path
 
-import leakpath
 import numpy as np
+
+import leakpath
 from leakpath import rmd
 
 LAGS = (2, 4, 8, 16, 32)

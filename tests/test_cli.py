@@ -7,9 +7,10 @@ import math
 import subprocess
 import sys
 
-import leakpath
 import numpy as np
 import pytest
+
+import leakpath
 from leakpath import cli
 from leakpath.surfaces import load, rmd, spectral
 

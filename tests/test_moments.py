@@ -14,6 +14,7 @@ import math
 
 import numpy as np
 import pytest
+
 from leakpath import moments as mom
 from leakpath.moments import Moments, nayak_moments, rms_curvature, rms_height, rms_slope
 from leakpath.surfaces import rmd, spectral

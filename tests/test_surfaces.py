@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
 from leakpath import surfaces
 from leakpath.surfaces import Surface, load, rmd, spectral
 

@@ -70,7 +70,8 @@ def percolation_threshold(
     solves = 1
     if not spans(lo_state):
         # Even the undeformed free region does not span (e.g. a wall of maxima).
-        return PercolationThreshold(0.0, lo_state.contact_fraction, 0.0, lo_state, lo_state, 1, axis)
+        frac = lo_state.contact_fraction
+        return PercolationThreshold(0.0, frac, 0.0, lo_state, lo_state, 1, axis)
     hi = prob.max_approach
     hi_state = prob.solve(hi, solver=solver)
     solves += 1
