@@ -29,9 +29,18 @@ from typing import Any, NoReturn
 
 from . import __version__
 from .moments import nayak_moments
-from .surfaces import Surface, rmd, spectral
+from .surfaces import Surface, load, rmd, spectral
 
-__all__ = ["main", "build_parser", "surface_statistics", "format_table", "UsageError"]
+__all__ = [
+    "main",
+    "build_parser",
+    "surface_statistics",
+    "format_table",
+    "format_summary",
+    "parse_surface_spec",
+    "UsageError",
+    "PAPER_SETUP",
+]
 
 PROG = "leakpath"
 
@@ -237,6 +246,600 @@ def _add_surface_parser(subparsers: Any) -> None:
     s.set_defaults(func=_cmd_surface_spectral)
 
 
+# ---------------------------------------------------------------------------- sweep/paper
+#: Files a sweep command writes into its output directory (besides figures/ and checkpoints/).
+TABLE_NAME = "table.csv"
+METADATA_NAME = "metadata.json"
+SURFACE_NAME = "surface.npz"
+FIELDS_NAME = "fields.npz"
+FIGURES_DIR = "figures"
+CHECKPOINT_DIR = "checkpoints"
+
+_SUMMARY_COLUMNS: tuple[tuple[str, str], ...] = (
+    ("k", "k"),
+    ("approach_star", "Delta*"),
+    ("contact_fraction", "contact"),
+    ("free_volume_star", "V*"),
+    ("V_pg_star", "V_pg*"),
+    ("mean_gap_star", "gbar*"),
+    ("m0_star", "m0*"),
+    ("m2_star", "m2*"),
+)
+
+#: Keys accepted in a SURFACE spec, with their converters.
+_SPEC_KEYS: dict[str, dict[str, Callable[[str], Any]]] = {
+    "rmd": {"m": int, "D": float, "seed": int, "sigma0": float, "length": float},
+    "spectral": {
+        "n": _shape_arg,
+        "hurst": float,
+        "seed": int,
+        "length": float,
+        "rms_height": float,
+        "rms_slope": float,
+        "long_cutoff": float,
+        "short_cutoff": float,
+    },
+}
+_SPEC_REQUIRED = {"rmd": ("m", "D", "seed"), "spectral": ("n", "hurst", "seed")}
+
+
+def parse_surface_spec(text: str) -> tuple[str, dict[str, Any]] | None:
+    """Parse ``rmd:m=8,D=2.3,seed=4`` or ``spectral:n=256,hurst=0.8,seed=1,rms_height=1``.
+
+    Returns ``(generator, keyword arguments)``, or ``None`` when ``text`` is not a spec (then
+    it names a file). Raises :class:`UsageError` for a malformed spec.
+    """
+    gen, sep, rest = text.partition(":")
+    if not sep or gen.lower() not in _SPEC_KEYS:
+        return None
+    gen = gen.lower()
+    allowed = _SPEC_KEYS[gen]
+    kwargs: dict[str, Any] = {}
+    for item in filter(None, (part.strip() for part in rest.split(","))):
+        key, eq, value = item.partition("=")
+        key = key.strip().replace("-", "_")
+        if not eq or key not in allowed:
+            raise UsageError(
+                f"SURFACE spec {text!r}: unknown or malformed item {item!r}; "
+                f"{gen} takes {', '.join(f'{k}=' for k in allowed)}"
+            )
+        try:
+            kwargs[key] = allowed[key](value.strip())
+        except (ValueError, argparse.ArgumentTypeError):
+            raise UsageError(f"SURFACE spec {text!r}: bad value for {key}: {value!r}") from None
+    missing = [k for k in _SPEC_REQUIRED[gen] if k not in kwargs]
+    if missing:
+        example = "rmd:m=7,D=2.1,seed=0" if gen == "rmd" else "spectral:n=256,hurst=0.8,seed=1"
+        raise UsageError(f"SURFACE spec {text!r}: missing {', '.join(missing)} (e.g. {example})")
+    return gen, kwargs
+
+
+def _surface_from_arg(text: str, dx: float | None) -> Surface:
+    spec = parse_surface_spec(text)
+    if spec is not None:
+        gen, kwargs = spec
+        if dx is not None:
+            raise UsageError("--dx applies to surface files only, not to a generator spec")
+        if gen == "rmd":
+            return rmd(kwargs.pop("m"), kwargs.pop("D"), **kwargs)
+        return spectral(kwargs.pop("n"), kwargs.pop("hurst"), **kwargs)
+    path = Path(text)
+    if not path.exists():
+        raise UsageError(
+            f"SURFACE {text!r} is neither an existing file nor a spec such as "
+            "'rmd:m=7,D=2.1,seed=0' or 'spectral:n=256,hurst=0.8,seed=1'"
+        )
+    return load(path, dx=dx)
+
+
+_OWN_PATTERNS = {
+    CHECKPOINT_DIR: ("manifest.json", "level_*.json", "level_*.npz", ".*.tmp"),
+    FIGURES_DIR: ("fig*.png", "fig*.pdf", "map_k*.png", "map_k*.pdf", ".*.tmp"),
+}
+
+
+def _prepare_outdir(out: Path, *, overwrite: bool, resume: bool) -> None:
+    """Refuse a non-empty output directory unless ``--overwrite``/``--resume``; create it.
+
+    ``--overwrite`` deletes only the files a sweep writes (checkpoints, figures, table,
+    metadata, surface, fields), nothing else in the directory.
+    """
+    if overwrite and resume:
+        raise UsageError("--overwrite and --resume exclude each other")
+    if out.exists() and not out.is_dir():
+        raise UsageError(f"--out {str(out)!r} exists and is not a directory")
+    non_empty = out.is_dir() and any(out.iterdir())
+    if non_empty and not (overwrite or resume):
+        raise UsageError(
+            f"output directory {str(out)!r} is not empty; pass --resume to continue its sweep "
+            "or --overwrite to replace its results"
+        )
+    if resume and non_empty and not (out / CHECKPOINT_DIR).is_dir():
+        raise UsageError(
+            f"nothing to resume in {str(out)!r} (no {CHECKPOINT_DIR}/ directory); "
+            "run without --resume, or with --overwrite"
+        )
+    if overwrite and non_empty:
+        for sub, patterns in _OWN_PATTERNS.items():
+            for pattern in patterns:
+                for f in (out / sub).glob(pattern):
+                    if f.is_file():
+                        f.unlink()
+        for name in (TABLE_NAME, METADATA_NAME, SURFACE_NAME, FIELDS_NAME):
+            if (out / name).is_file():
+                (out / name).unlink()
+    out.mkdir(parents=True, exist_ok=True)
+
+
+def format_summary(rows: Sequence[dict[str, Any]]) -> str:
+    """The summary table: k, Δ*, contact fraction, V*, V_pg*, ḡ*, m0*, m2* (4 decimals)."""
+    header = [label for _, label in _SUMMARY_COLUMNS]
+    body = []
+    for row in rows:
+        cells = []
+        for key, _ in _SUMMARY_COLUMNS:
+            v = row[key]
+            cells.append(str(v) if isinstance(v, int) else f"{v:.4f}")
+        body.append(cells)
+    widths = [max(len(h), *(len(r[i]) for r in body)) for i, h in enumerate(header)]
+    lines = ["  ".join(h.rjust(w) for h, w in zip(header, widths, strict=True))]
+    lines += ["  ".join(c.rjust(w) for c, w in zip(r, widths, strict=True)) for r in body]
+    return "\n".join(lines)
+
+
+def _run_sweep(
+    surface: Surface,
+    args: argparse.Namespace,
+    *,
+    command: str,
+    description: str,
+    warm_start: bool,
+    levels: int,
+    axis: Any = 0,
+    boundary: str = "free",
+    E: float = 1.0,  # noqa: N803
+    nu: float = 0.0,
+    connectivity: int = 4,
+    keep_fields: bool = False,
+    argv: Sequence[str] | None = None,
+) -> int:
+    """Run a sweep into ``args.out`` and print its summary (table or JSON)."""
+    from .contact import contact_modulus
+    from .sweep import CheckpointMismatch, sweep
+
+    out: Path = args.out
+    contact_modulus(E, nu)  # validate before touching the output directory
+    _prepare_outdir(out, overwrite=args.overwrite, resume=args.resume)
+    try:
+        result = sweep(
+            surface,
+            levels=levels,
+            solver=args.solver,
+            warm_start=warm_start,
+            axis=axis,
+            connectivity=connectivity,
+            E=E,
+            nu=nu,
+            boundary=boundary,
+            keep_fields=keep_fields,
+            progress=sys.stderr.isatty(),
+            checkpoint_dir=out / CHECKPOINT_DIR,
+        )
+    except CheckpointMismatch as exc:
+        raise UsageError(
+            f"cannot resume in {str(out)!r}: its checkpoints are from a different sweep "
+            f"({exc.field} differs); use --overwrite or another --out"
+        ) from None
+    files = {
+        "table": out / TABLE_NAME,
+        "metadata": out / METADATA_NAME,
+        "surface": out / SURFACE_NAME,
+    }
+    surface.save(files["surface"], overwrite=True)
+    result.to_csv(files["table"])
+    if keep_fields:
+        files["fields"] = result.save_fields(out / FIELDS_NAME)
+    figures = result.plot(out / FIGURES_DIR)
+    extra = {
+        "command": command,
+        "argv": list(argv) if argv is not None else sys.argv[1:],
+        "description": description,
+        "outputs": {
+            **{k: str(v) for k, v in files.items()},
+            "figures": [str(p) for p in figures],
+            "checkpoints": str(out / CHECKPOINT_DIR),
+        },
+    }
+    result.to_json(files["metadata"], extra=extra)
+    summary = [{key: row[key] for key, _ in _SUMMARY_COLUMNS} for row in result.rows]
+    if args.json:
+        payload = {
+            "command": command,
+            "description": description,
+            "out": str(out),
+            "files": extra["outputs"],
+            "resumed_levels": result.resumed,
+            "seconds": result.total_seconds,
+            "summary": summary,
+        }
+        print(json.dumps(payload, indent=2, default=_json_number))
+    else:
+        print(description)
+        print(format_summary(summary))
+        resumed = f" ({len(result.resumed)} levels from checkpoints)" if result.resumed else ""
+        print(
+            f"{len(result.rows)} levels in {result.total_seconds:.1f} s{resumed}; wrote "
+            f"{files['table']}, {files['metadata']}, {len(figures)} figures in "
+            f"{out / FIGURES_DIR}"
+        )
+    return 0
+
+
+def _json_number(obj: Any) -> Any:
+    return obj.item() if hasattr(obj, "item") else str(obj)
+
+
+def _add_sweep_output_arguments(p: argparse.ArgumentParser, default_out: str) -> None:
+    p.add_argument(
+        "--out",
+        type=Path,
+        default=Path(default_out),
+        metavar="DIR",
+        help=f"output directory (default: {default_out})",
+    )
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace the results in a non-empty --out directory",
+    )
+    p.add_argument(
+        "--resume",
+        action="store_true",
+        help="continue an interrupted run in --out from its checkpoints (same final table)",
+    )
+    p.add_argument("--json", action="store_true", help="print the summary as JSON")
+
+
+def _solver_arg(p: argparse.ArgumentParser, help_text: str) -> None:
+    from .contact import SOLVERS
+
+    p.add_argument("--solver", choices=SOLVERS, default="auto", help=help_text)
+
+
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
+    return value
+
+
+def _axis_arg(text: str) -> int | str:
+    if text in ("0", "1"):
+        return int(text)
+    if text in ("either", "both"):
+        return text
+    raise argparse.ArgumentTypeError(f"expected 0, 1, either or both, got {text!r}")
+
+
+#: The paper's setup (Cinat, Paggi, Borri): RMD surface, D = 2.1, m = 7, side 0.1 mm.
+PAPER_SETUP: dict[str, Any] = {"m": 7, "D": 2.1, "length": 0.1, "unit": "mm", "levels": 20}
+
+
+def _cmd_paper(args: argparse.Namespace) -> int:
+    setup = PAPER_SETUP
+    surface = rmd(setup["m"], setup["D"], seed=args.seed, length=setup["length"])
+    surface.metadata["unit"] = setup["unit"]
+    surface.metadata["experiment"] = (
+        "Cinat, Paggi, Borri: Percolation properties of the free volume generated by two "
+        "rough surfaces in contact"
+    )
+    n = 2 ** setup["m"] + 1
+    mode = "warm start from the previous level" if args.warm_start else "cold (p = 0) per level"
+    description = (
+        f"leakpath paper: RMD surface D = {setup['D']}, m = {setup['m']} ({n} x {n}), side "
+        f"{setup['length']} mm, seed {args.seed}; lengths in mm, pressures in units of E "
+        f"(E = 1, nu = 0); {setup['levels']} levels Delta_k = k h_s/{setup['levels']}; "
+        f"solver {args.solver}, {mode}"
+    )
+    return _run_sweep(
+        surface,
+        args,
+        command="paper",
+        description=description,
+        warm_start=args.warm_start,
+        levels=setup["levels"],
+    )
+
+
+def _add_paper_parser(subparsers: Any) -> None:
+    """``leakpath paper``: the paper's experiment (table, metadata and figures)."""
+    p = subparsers.add_parser(
+        "paper",
+        help="run the paper's experiment (RMD D=2.1, m=7, 20 levels) and draw its figures",
+        description=(
+            "The experiment of Cinat, Paggi & Borri: an RMD surface (D = 2.1, m = 7, 129 x 129 "
+            "points, side 0.1 mm; lengths in mm) pressed against a rigid flat at 20 equal "
+            "approaches up to its height range. Writes table.csv, metadata.json, surface.npz "
+            "and figures/ into --out and prints a summary."
+        ),
+    )
+    p.add_argument("--seed", type=int, default=0, help="RMD seed (default 0)")
+    _solver_arg(
+        p,
+        "contact solver: auto (default; the fast exact active-set solver, the same unique "
+        "minimiser) or lawson-hanson (the paper's algorithm itself, slow), active-set, "
+        "polonsky-keer",
+    )
+    p.add_argument(
+        "--warm-start",
+        action="store_true",
+        help="start each level from the previous level's contact set (default: every level "
+        "from p = 0, as in the paper)",
+    )
+    _add_sweep_output_arguments(p, "paper-results")
+    p.set_defaults(func=_cmd_paper)
+
+
+def _cmd_sweep(args: argparse.Namespace) -> int:
+    surface = _surface_from_arg(args.surface, args.dx)
+    if args.unit:
+        surface.metadata["unit"] = args.unit
+    unit = surface.metadata.get("unit", "the surface's length unit")
+    ny, nx = surface.shape
+    description = (
+        f"leakpath sweep: {args.surface} ({ny} x {nx}, dx = {surface.dx:.6g}, lengths in "
+        f"{unit}); {args.levels} levels, boundary {args.boundary}, flow axis {args.axis}, "
+        f"solver {args.solver}, {'cold' if args.no_warm_start else 'warm start'}"
+    )
+    return _run_sweep(
+        surface,
+        args,
+        command="sweep",
+        description=description,
+        warm_start=not args.no_warm_start,
+        levels=args.levels,
+        axis=args.axis,
+        boundary=args.boundary,
+        E=args.E,
+        nu=args.nu,
+        connectivity=args.connectivity,
+        keep_fields=args.keep_fields,
+    )
+
+
+def _add_sweep_parser(subparsers: Any) -> None:
+    """``leakpath sweep SURFACE``: a sweep over the approach for any surface."""
+    p = subparsers.add_parser(
+        "sweep",
+        help="sweep the approach for a surface file or generator spec",
+        description=(
+            "Press SURFACE against a rigid flat at LEVELS + 1 equal approaches from 0 to its "
+            "height range (free boundary) or to full contact (periodic), and write table.csv, "
+            "metadata.json, surface.npz and figures/ into --out. SURFACE is a file (.npz, "
+            ".npy, .csv, .txt, ...; give --dx when the file has no spacing) or a spec such as "
+            "rmd:m=8,D=2.3,seed=4 or spectral:n=256,hurst=0.8,seed=1,rms_height=1."
+        ),
+    )
+    p.add_argument("surface", metavar="SURFACE", help="surface file or generator spec")
+    p.add_argument("--dx", type=float, help="grid spacing for files that do not store it")
+    p.add_argument("--unit", help="name of the length unit, for labels and metadata")
+    p.add_argument("--levels", type=_positive_int, default=20, help="number of steps (default 20)")
+    _solver_arg(p, "contact solver (default auto: the fast exact active-set solver)")
+    p.add_argument(
+        "--no-warm-start",
+        action="store_true",
+        help="solve every level from p = 0 (default: start from the previous contact set)",
+    )
+    p.add_argument(
+        "--boundary",
+        choices=("free", "periodic"),
+        default="free",
+        help="elastic boundary (default free)",
+    )
+    p.add_argument(
+        "--axis",
+        type=_axis_arg,
+        default=0,
+        metavar="{0,1,either,both}",
+        help="flow direction for V_pg* and the maps (default 0)",
+    )
+    p.add_argument(
+        "--connectivity",
+        type=int,
+        choices=(4, 8),
+        default=4,
+        help="free-cell neighbourhood (default 4)",
+    )
+    p.add_argument("--E", type=float, default=1.0, help="Young's modulus (default 1)")
+    p.add_argument("--nu", type=float, default=0.0, help="Poisson's ratio (default 0)")
+    p.add_argument(
+        "--keep-fields",
+        action="store_true",
+        help="also write per-level pressure, gap and cluster labels to fields.npz",
+    )
+    _add_sweep_output_arguments(p, "sweep-results")
+    p.set_defaults(func=_cmd_sweep)
+
+
+# ---------------------------------------------------------------------------- ensemble
+def _ensemble_list(kind: Callable[[str], Any], what: str) -> Callable[[str], list[Any]]:
+    """argparse type: a comma-separated list of ``kind`` values (``2.1,2.3,2.5``)."""
+
+    def parse(text: str) -> list[Any]:
+        items = [t.strip() for t in text.split(",")]
+        try:
+            if not all(items):
+                raise ValueError
+            return [kind(t) for t in items]
+        except ValueError:
+            raise argparse.ArgumentTypeError(
+                f"expected a comma-separated list of {what}, got {text!r}"
+            ) from None
+
+    return parse
+
+
+def _ensemble_count(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
+    return value
+
+
+def _ensemble_axis(text: str) -> int | str:
+    if text in ("0", "1"):
+        return int(text)
+    if text in ("either", "both"):
+        return text
+    raise argparse.ArgumentTypeError(f"expected 0, 1, either or both, got {text!r}")
+
+
+def _ensemble_summary_rows(result: Any) -> list[tuple[str, Any]]:
+    run = result.run or {}
+    rows: list[tuple[str, Any]] = [
+        ("ensemble", str(result.directory)),
+        (
+            "tasks",
+            f"{run.get('tasks_total')} (run {run.get('tasks_run')}, "
+            f"resumed {run.get('tasks_resumed')})",
+        ),
+        ("executor", f"{run.get('executor')}, workers {run.get('workers')}"),
+        ("wall time", f"{run.get('wall_seconds', float('nan')):.1f} s"),
+    ]
+    for ps in result.param_sets:
+        s = result.threshold_summary[ps.key]
+        a = s["contact_fraction"]
+        half = (a["ci_high"] - a["ci_low"]) / 2
+        rows.append(
+            (
+                f"a_c {ps.key}",
+                f"mean {a['mean']:.4f} +/- {half:.4f} (95 % band), std {a['std']:.4f}, "
+                f"median {a['quantiles']['0.5']:.4f}, found {s['n_found']}/{s['surfaces']}",
+            )
+        )
+    rows.append(("aggregate", str(result.aggregate_path)))
+    rows.append(("thresholds", str(result.thresholds_path)))
+    rows.append(("summary", str(result.json_path)))
+    if result.figures:
+        rows.append(("figures", str(result.figures[0].parent)))
+    return rows
+
+
+def _cmd_ensemble(args: argparse.Namespace) -> int:
+    from .ensemble import ensemble
+
+    if args.workers is not None and args.scheduler:
+        raise UsageError("--workers sizes local processes; with --scheduler size the cluster")
+    if args.resume and args.overwrite:
+        raise UsageError("--resume and --overwrite exclude each other")
+    try:
+        result = ensemble(
+            generator="rmd",
+            params={"D": args.D, "m": args.m},
+            surfaces=args.surfaces,
+            levels=args.levels,
+            solver=args.solver,
+            warm_start=not args.cold,
+            axis=args.axis,
+            out=args.out,
+            executor=args.scheduler,
+            workers=args.workers,
+            resume=args.resume,
+            overwrite=args.overwrite,
+            progress=True,
+            figures=not args.no_figures,
+        )
+    except (FileExistsError, ImportError) as exc:
+        raise UsageError(str(exc)) from None
+    except RuntimeError as exc:  # failed tasks; the finished ones are on disk
+        print(f"{PROG}: error: {_one_line(str(exc))}", file=sys.stderr)
+        return 1
+    if args.json:
+        print(json.dumps(result.summary(), indent=2))
+    else:
+        print(format_table(_ensemble_summary_rows(result)))
+    return 0
+
+
+def _add_ensemble_parser(subparsers: Any) -> None:
+    """``leakpath ensemble``: many RMD surfaces per (D, m), in parallel, with error bands."""
+    from .contact import SOLVERS
+
+    p = subparsers.add_parser(
+        "ensemble",
+        help="sweeps over many surfaces per parameter set, in parallel, aggregated",
+        description="Run one sweep per (D, m, seed) on local processes or a Dask cluster, "
+        "write each finished surface to OUT/tasks at once, then the mean curves with 95 % "
+        "confidence bands (OUT/aggregate.csv), the percolation thresholds "
+        "(OUT/thresholds.csv, OUT/ensemble.json) and figures (OUT/figures).",
+    )
+    p.add_argument(
+        "--D",
+        type=_ensemble_list(float, "numbers"),
+        required=True,
+        metavar="D[,D...]",
+        help="fractal dimensions, 2 < D < 3 (e.g. 2.1,2.3,2.5)",
+    )
+    p.add_argument(
+        "--m",
+        type=_ensemble_list(int, "integers"),
+        required=True,
+        metavar="M[,M...]",
+        help="RMD levels: grids (2^m + 1)^2 (e.g. 7)",
+    )
+    p.add_argument(
+        "--surfaces",
+        type=_ensemble_count,
+        default=50,
+        help="surfaces per parameter set, seeds 0..N-1 (default 50)",
+    )
+    p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output directory")
+    p.add_argument(
+        "--levels", type=_ensemble_count, default=20, help="approach steps per sweep (default 20)"
+    )
+    p.add_argument(
+        "--solver", choices=SOLVERS, default="auto", help="contact solver (default auto)"
+    )
+    p.add_argument(
+        "--axis",
+        type=_ensemble_axis,
+        default=0,
+        help="flow axis for V_pg and the threshold: 0, 1, either, both (default 0)",
+    )
+    p.add_argument(
+        "--cold", action="store_true", help="solve every level from p = 0 (no warm start)"
+    )
+    p.add_argument(
+        "--workers",
+        type=_ensemble_count,
+        default=None,
+        help="local worker processes (default: all CPUs), one rayon thread each",
+    )
+    p.add_argument(
+        "--scheduler",
+        default=None,
+        metavar="ADDRESS",
+        help="run on a Dask cluster (e.g. tcp://host:8786; needs leakpath[dask])",
+    )
+    p.add_argument(
+        "--resume", action="store_true", help="run only the tasks missing in a previous --out"
+    )
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="delete a previous ensemble's files in --out first",
+    )
+    p.add_argument("--no-figures", action="store_true", help="do not write OUT/figures")
+    p.add_argument("--json", action="store_true", help="print ensemble.json instead of a table")
+    p.set_defaults(func=_cmd_ensemble)
+
+
 # ---------------------------------------------------------------------------- entry point
 def build_parser() -> argparse.ArgumentParser:
     """The ``leakpath`` argument parser with every registered command."""
@@ -247,6 +850,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"{PROG} {__version__}")
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     _add_surface_parser(subparsers)
+    _add_paper_parser(subparsers)
+    _add_sweep_parser(subparsers)
+    _add_ensemble_parser(subparsers)
     return parser
 
 

@@ -1,0 +1,541 @@
+"""Tests for :mod:`leakpath.ensemble`: executors, recovery, resume, statistics, CLI.
+
+The ensembles are tiny (m = 4, 17² grids, 6 levels, 2 × 4 surfaces) so that process start-up,
+not solving, dominates. Every run uses one rayon thread per task (the default), so the
+per-surface tables — and hence the aggregates — are byte-identical across executors.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import leakpath
+from leakpath import cli
+from leakpath.ensemble import (
+    QUANTITIES,
+    aggregate,
+    ensemble,
+    param_key,
+    regularized_incomplete_beta,
+    student_t_ppf,
+    t_critical,
+    threshold_from_rows,
+)
+
+PARAMS = {"D": [2.2, 2.6], "m": [4]}
+SURFACES = 4
+LEVELS = 6
+CLI_ARGS = ["--D", "2.2,2.6", "--m", "4", "--surfaces", str(SURFACES), "--levels", str(LEVELS)]
+KEYS = ("D=2.2_m=4", "D=2.6_m=4")
+
+
+def run_ensemble(out: Path, **kwargs):
+    kwargs.setdefault("figures", False)
+    return ensemble(
+        params=PARAMS, surfaces=SURFACES, levels=LEVELS, out=out, progress=False, **kwargs
+    )
+
+
+def run_cli(*args: str, env: dict[str, str] | None = None, **kwargs):
+    return subprocess.run(
+        [sys.executable, "-m", "leakpath", "ensemble", *args],
+        capture_output=True,
+        text=True,
+        timeout=180,
+        env={**os.environ, **(env or {})},
+        **kwargs,
+    )
+
+
+def read_csv(path: Path) -> list[dict[str, str]]:
+    with open(path, newline="", encoding="utf-8") as fh:
+        return list(csv.DictReader(fh))
+
+
+def task_files(out: Path) -> dict[str, int]:
+    """Relative path → mtime_ns of every finished task table."""
+    return {
+        str(p.relative_to(out)): p.stat().st_mtime_ns for p in sorted(out.glob("tasks/*/*.csv"))
+    }
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory):
+    """The reference ensemble: local processes, 2 workers, figures on."""
+    out = tmp_path_factory.mktemp("ensemble") / "reference"
+    result = run_ensemble(out, workers=2, figures=True)
+    return result
+
+
+# ---------------------------------------------------------------------------- Student t
+class TestStudentT:
+    def test_against_scipy(self):
+        stats = pytest.importorskip("scipy.stats")
+        for df in (1, 2, 3, 4, 5, 9, 19, 49, 99, 250, 1000, 5000, 2.5, 0.7):
+            for p in (0.6, 0.8, 0.9, 0.95, 0.975, 0.99, 0.995, 0.9995, 0.025, 0.1, 1e-6):
+                assert student_t_ppf(p, df) == pytest.approx(stats.t.ppf(p, df), rel=1e-12), (
+                    p,
+                    df,
+                )
+        for df in (2e5, 1e7):  # Cornish–Fisher branch
+            assert student_t_ppf(0.975, df) == pytest.approx(stats.t.ppf(0.975, df), rel=1e-12)
+
+    def test_closed_forms_and_known_values(self):
+        for p in (0.9, 0.975, 0.999):
+            assert student_t_ppf(p, 1) == pytest.approx(math.tan(math.pi * (p - 0.5)), rel=1e-13)
+            exact2 = (2 * p - 1) / math.sqrt(2 * p * (1 - p))
+            assert student_t_ppf(p, 2) == pytest.approx(exact2, rel=1e-13)
+        assert t_critical(50) == pytest.approx(2.009575237129239, rel=1e-14)
+        assert t_critical(2) == pytest.approx(12.706204736174698, rel=1e-13)
+        assert math.isnan(t_critical(1))
+        assert student_t_ppf(0.5, 7) == 0.0
+        assert student_t_ppf(0.1, 7) == -student_t_ppf(0.9, 7)
+
+    def test_incomplete_beta_against_scipy(self):
+        special = pytest.importorskip("scipy.special")
+        for a in (0.5, 1.0, 3.5, 40.0, 2e3):
+            for b in (0.5, 2.0, 30.0):
+                for x in (1e-4, 0.2, 0.5, 0.8, 0.9999):
+                    assert regularized_incomplete_beta(a, b, x) == pytest.approx(
+                        special.betainc(a, b, x), rel=1e-12, abs=1e-300
+                    )
+
+    def test_bad_arguments(self):
+        with pytest.raises(ValueError, match="p"):
+            student_t_ppf(1.0, 3)
+        with pytest.raises(ValueError, match="df"):
+            student_t_ppf(0.9, 0)
+
+
+# ---------------------------------------------------------------------------- threshold
+def _rows(spans0, spans1=None, a=None, both=None):
+    """Synthetic sweep rows; ``V_pg`` (axis "both") > 0 where ``both`` (default: 0 and 1)."""
+    n = len(spans0)
+    spans1 = spans0 if spans1 is None else spans1
+    a = a or [k / (2 * n) for k in range(n)]
+    return [
+        {
+            "contact_fraction": a[k],
+            "approach_star": k / (n - 1),
+            "n_spanning_axis0": int(spans0[k]),
+            "n_spanning_axis1": int(spans1[k]),
+            "V_pg": 1.0
+            if (both is None and spans0[k] and spans1[k]) or (both and both[k])
+            else 0.0,
+        }
+        for k in range(n)
+    ]
+
+
+class TestThresholdFromRows:
+    def test_first_level_without_spanning(self):
+        rows = _rows([1, 1, 2, 0, 0], a=[0.0, 0.1, 0.2, 0.3, 0.4])
+        t = threshold_from_rows(rows, 0)
+        assert t["found"] and t["k_c"] == 3
+        assert t["contact_fraction_c"] == 0.3
+        assert t["contact_fraction_below"] == 0.2
+        assert t["contact_fraction_mid"] == pytest.approx(0.25)
+        assert t["approach_star_c"] == 0.75 and t["approach_star_below"] == 0.5
+        assert not t["respans"]
+
+    def test_axes_not_found_and_respans(self):
+        rows = _rows([1, 1, 0, 0], [1, 1, 1, 0])
+        assert threshold_from_rows(rows, 0)["k_c"] == 2
+        assert threshold_from_rows(rows, 1)["k_c"] == 3
+        assert threshold_from_rows(rows, "either")["k_c"] == 3
+        assert threshold_from_rows(rows, "both")["k_c"] == 2
+        # "both" needs one cluster spanning both axes: only V_pg tells, not the two counts.
+        crossing = _rows([1, 1, 1, 0], [1, 1, 1, 0], both=[1, 0, 0, 0])
+        assert threshold_from_rows(crossing, "both")["k_c"] == 1
+        assert threshold_from_rows(crossing, "either")["k_c"] == 3
+        never = threshold_from_rows(_rows([1, 1, 1]), 0)
+        assert not never["found"] and never["k_c"] == -1
+        assert math.isnan(never["contact_fraction_c"])
+        assert threshold_from_rows(_rows([1, 0, 1]), 0)["respans"]
+        at_zero = threshold_from_rows(_rows([0, 0]), 0)
+        assert at_zero["k_c"] == 0 and math.isnan(at_zero["contact_fraction_below"])
+
+    def test_brackets_the_bisected_threshold(self, reference):
+        """The exact threshold (bisection, leakpath.threshold) lies in [below, c]."""
+        from leakpath.threshold import percolation_threshold
+
+        checked = 0
+        for row in reference.thresholds:
+            if not row["found"] or row["k_c"] == 0:
+                continue
+            surface = leakpath.rmd(4, row["D"], seed=row["seed"])
+            exact = percolation_threshold(surface, axis=0, atol=1e-9 * surface.height_range)
+            d_star = exact.approach / surface.height_range
+            assert row["approach_star_below"] - 1e-9 < d_star <= row["approach_star_c"] + 1e-9
+            checked += 1
+        assert checked >= 1
+
+
+# ---------------------------------------------------------------------------- aggregation
+class TestAggregate:
+    def test_files_and_layout(self, reference):
+        out = reference.directory
+        for name in ("manifest.json", "aggregate.csv", "thresholds.csv", "ensemble.json"):
+            assert (out / name).is_file()
+        assert len(task_files(out)) == 2 * SURFACES
+        assert len(list(out.glob("tasks/*/*.json"))) == 2 * SURFACES
+        assert sorted(p.name for p in (out / "tasks").iterdir()) == list(KEYS)
+        assert not list(out.rglob(".*.tmp"))
+        for stem in ("fig2_vpg_volume_gap", "fig3_vpg_moments", "thresholds_hist"):
+            for fmt in ("png", "pdf"):
+                assert (out / "figures" / f"{stem}.{fmt}").stat().st_size > 1000
+        meta = json.loads((out / "tasks" / KEYS[0] / "seed-1.json").read_text())
+        assert meta["params"] == {"D": 2.2, "m": 4} and meta["seed"] == 1
+        assert meta["worker"]["rayon_num_threads"] == "1"
+        assert reference.run["executor"] == "processes" and reference.run["tasks_run"] == 8
+
+    def test_against_direct_numpy(self, reference):
+        """mean, std (ddof 1) and the t band, recomputed from the per-surface CSVs."""
+        stats = pytest.importorskip("scipy.stats")
+        out = reference.directory
+        agg = read_csv(out / "aggregate.csv")
+        assert [r["param_key"] for r in agg] == [KEYS[0]] * 7 + [KEYS[1]] * 7
+        for key in KEYS:
+            tables = [read_csv(out / "tasks" / key / f"seed-{s}.csv") for s in range(SURFACES)]
+            rows = [r for r in agg if r["param_key"] == key]
+            assert [int(r["k"]) for r in rows] == list(range(LEVELS + 1))
+            n = len(tables)
+            tq = stats.t.ppf(0.975, n - 1)
+            for q in QUANTITIES:
+                x = np.array([[float(r[q]) for r in t] for t in tables])  # (surfaces, levels)
+                mean = np.mean(x, axis=0)
+                std = np.std(x, axis=0, ddof=1)
+                half = tq * std / np.sqrt(n)
+                got = {
+                    s: np.array([float(r[f"{q}_{s}"]) for r in rows])
+                    for s in ("mean", "std", "ci_low", "ci_high")
+                }
+                np.testing.assert_allclose(got["mean"], mean, rtol=1e-14, atol=1e-300)
+                np.testing.assert_allclose(got["std"], std, rtol=1e-12, atol=1e-15)
+                np.testing.assert_allclose(got["ci_low"], mean - half, rtol=1e-12, atol=1e-14)
+                np.testing.assert_allclose(got["ci_high"], mean + half, rtol=1e-12, atol=1e-14)
+            # V_pg* starts at 1 and the contact fraction grows on average.
+            assert float(rows[0]["V_pg_star_mean"]) == 1.0
+            assert float(rows[-1]["contact_fraction_mean"]) > float(
+                rows[1]["contact_fraction_mean"]
+            )
+
+    def test_thresholds_against_direct_computation(self, reference):
+        out = reference.directory
+        thr = read_csv(out / "thresholds.csv")
+        summary = json.loads((out / "ensemble.json").read_text())["thresholds"]
+        for key in KEYS:
+            found = []
+            for seed in range(SURFACES):
+                table = read_csv(out / "tasks" / key / f"seed-{seed}.csv")
+                k_c = next((k for k, r in enumerate(table) if int(r["n_spanning_axis0"]) == 0), -1)
+                row = next(r for r in thr if r["param_key"] == key and int(r["seed"]) == seed)
+                assert int(row["k_c"]) == k_c
+                if k_c >= 0:
+                    assert row["found"] == "true"
+                    assert float(row["contact_fraction_c"]) == float(table[k_c]["contact_fraction"])
+                    found.append(float(table[k_c]["contact_fraction"]))
+                else:
+                    assert row["found"] == "false" and row["contact_fraction_c"] == "nan"
+            s = summary[key]
+            assert s["n_found"] == len(found) and s["surfaces"] == SURFACES
+            if found:
+                assert s["contact_fraction"]["mean"] == pytest.approx(np.mean(found), rel=1e-14)
+                assert s["contact_fraction"]["quantiles"]["0.5"] == pytest.approx(
+                    np.median(found), rel=1e-14
+                )
+            if len(found) > 1:
+                assert s["contact_fraction"]["std"] == pytest.approx(
+                    np.std(found, ddof=1), rel=1e-12
+                )
+
+    def test_reaggregation_is_byte_identical(self, reference, tmp_path):
+        """aggregate(DIR) again (other process state, other order on disk) → same bytes."""
+        before = reference.aggregate_path.read_bytes()
+        thr = reference.thresholds_path.read_bytes()
+        again = aggregate(reference.directory, figures=False)
+        assert again.aggregate_path.read_bytes() == before
+        assert again.thresholds_path.read_bytes() == thr
+
+    def test_missing_task_is_reported(self, reference, tmp_path):
+        import shutil
+
+        copy = tmp_path / "copy"
+        shutil.copytree(reference.directory, copy)
+        (copy / "tasks" / KEYS[1] / "seed-2.csv").unlink()
+        with pytest.raises(ValueError, match="seed-2"):
+            aggregate(copy, figures=False)
+
+
+# ---------------------------------------------------------------------------- executors
+class TestExecutors:
+    def test_killed_worker_process_is_replaced(self, reference, tmp_path, monkeypatch):
+        """A worker dies after its sweep (os._exit): the pool is rebuilt, lost tasks rerun."""
+        marker = tmp_path / "kill-once"
+        marker.touch()
+        monkeypatch.setenv("LEAKPATH_TEST_KILL_ONCE", str(marker))
+        result = run_ensemble(tmp_path / "run", workers=2)
+        assert not marker.exists()  # a worker consumed it and died
+        assert result.run["pool_restarts"] >= 1
+        assert result.run["tasks_run"] == 2 * SURFACES
+        assert result.aggregate_path.read_bytes() == reference.aggregate_path.read_bytes()
+        assert result.thresholds_path.read_bytes() == reference.thresholds_path.read_bytes()
+
+    def test_dask_local_cluster_matches_processes(self, reference, tmp_path, monkeypatch):
+        distributed = pytest.importorskip("distributed")
+        with (
+            distributed.LocalCluster(
+                n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None
+            ) as cluster,
+            distributed.Client(cluster) as client,
+        ):
+            result = run_ensemble(tmp_path / "dask", executor=client)
+            assert result.run["executor"] == "dask"
+            assert result.aggregate_path.read_bytes() == reference.aggregate_path.read_bytes()
+
+            # A worker process dies mid-run (same hook); the scheduler address as executor.
+            marker = tmp_path / "kill-once"
+            marker.touch()
+            monkeypatch.setenv("LEAKPATH_TEST_KILL_ONCE", str(marker))
+            killed = run_ensemble(tmp_path / "dask-killed", executor=cluster.scheduler_address)
+            assert not marker.exists()
+            assert killed.run["tasks_run"] == 2 * SURFACES
+            assert killed.aggregate_path.read_bytes() == reference.aggregate_path.read_bytes()
+            assert killed.thresholds_path.read_bytes() == reference.thresholds_path.read_bytes()
+
+    def test_local_processes_without_dask_installed(self, tmp_path):
+        """The package imports and the default executor runs with dask unimportable."""
+        code = (
+            "import sys; sys.modules['dask'] = None; sys.modules['distributed'] = None\n"
+            "from leakpath.ensemble import ensemble\n"
+            f"r = ensemble(params={{'D': 2.3, 'm': 3}}, surfaces=2, levels=2, "
+            f"out={str(tmp_path / 'nodask')!r}, workers=2, progress=False, figures=False)\n"
+            "print(r.run['executor'], r.run['tasks_run'])\n"
+            "try:\n"
+            "    ensemble(params={'D': 2.3, 'm': 3}, surfaces=2, levels=2, executor='tcp://x:1',"
+            f" out={str(tmp_path / 'nodask2')!r}, progress=False)\n"
+            "except ImportError as e:\n"
+            "    print('ImportError', 'leakpath[dask]' in str(e))\n"
+            f"import os; print(os.path.exists({str(tmp_path / 'nodask2')!r}))\n"
+        )
+        proc = subprocess.run(
+            [sys.executable, "-c", code], capture_output=True, text=True, timeout=120
+        )
+        assert proc.returncode == 0, proc.stderr
+        assert proc.stdout.split() == ["processes", "2", "ImportError", "True", "False"]
+
+
+# ---------------------------------------------------------------------------- resume
+class TestResume:
+    def test_interrupted_driver_then_resume(self, reference, tmp_path):
+        """The driver is SIGKILLed after 3 written tasks; --resume runs only the other 5."""
+        out = tmp_path / "run"
+        log = tmp_path / "driver.log"
+        with open(log, "wb") as fh:
+            proc = subprocess.Popen(
+                [
+                    sys.executable,
+                    "-m",
+                    "leakpath",
+                    "ensemble",
+                    *CLI_ARGS,
+                    "--out",
+                    str(out),
+                    "--workers",
+                    "2",
+                    "--no-figures",
+                ],
+                stdout=fh,
+                stderr=subprocess.STDOUT,
+                env={**os.environ, "LEAKPATH_TEST_STOP_AFTER": "3"},
+                start_new_session=True,
+            )
+            try:
+                proc.wait(timeout=180)
+            finally:  # its pool processes exit by themselves within ~1 s; make sure
+                time.sleep(2.5)
+                try:
+                    os.killpg(proc.pid, signal.SIGKILL)
+                    orphans = True
+                except ProcessLookupError:
+                    orphans = False
+        assert not orphans, "worker processes outlived the killed driver"
+        assert proc.returncode == -signal.SIGKILL
+        before = task_files(out)
+        assert len(before) == 3
+        assert not (out / "aggregate.csv").exists()
+
+        again = run_cli(*CLI_ARGS, "--out", str(out), "--workers", "2", "--no-figures")
+        assert again.returncode == 2 and "--resume" in again.stderr  # refuses without it
+
+        resumed = run_cli(
+            *CLI_ARGS, "--out", str(out), "--workers", "2", "--no-figures", "--resume", "--json"
+        )
+        assert resumed.returncode == 0, resumed.stderr
+        summary = json.loads(resumed.stdout)
+        assert summary["run"]["tasks_run"] == 5 and summary["run"]["tasks_resumed"] == 3
+        ran = {f"tasks/{k}/seed-{s}.csv" for k, s in summary["run"]["ran"]}
+        assert ran.isdisjoint(before)
+        after = task_files(out)
+        assert len(after) == 8
+        assert {p: after[p] for p in before} == before  # finished tasks were not redone
+        assert (out / "aggregate.csv").read_bytes() == reference.aggregate_path.read_bytes()
+
+    def test_resume_extends_the_seeds(self, reference, tmp_path):
+        out = tmp_path / "grow"
+        first = ensemble(
+            params=PARAMS,
+            surfaces=2,
+            levels=LEVELS,
+            out=out,
+            workers=2,
+            progress=False,
+            figures=False,
+        )
+        assert first.run["tasks_run"] == 4
+        before = task_files(out)
+        grown = run_ensemble(out, workers=2, resume=True)
+        assert grown.run["tasks_resumed"] == 4 and grown.run["tasks_run"] == 4
+        assert sorted(s for _, s in grown.run["ran"]) == [2, 2, 3, 3]
+        assert {p: task_files(out)[p] for p in before} == before
+        assert grown.aggregate_path.read_bytes() == reference.aggregate_path.read_bytes()
+
+        nothing = run_ensemble(out, workers=2, resume=True)
+        assert nothing.run["tasks_run"] == 0 and nothing.run["tasks_resumed"] == 8
+
+    def test_resume_refuses_a_different_ensemble(self, reference, tmp_path):
+        import shutil
+
+        copy = tmp_path / "copy"
+        shutil.copytree(reference.directory, copy)
+        with pytest.raises(ValueError, match="levels"):
+            ensemble(
+                params=PARAMS,
+                surfaces=SURFACES,
+                levels=LEVELS + 1,
+                out=copy,
+                resume=True,
+                progress=False,
+            )
+        with pytest.raises(FileExistsError, match="not empty"):
+            run_ensemble(copy)
+        fresh = run_ensemble(copy, overwrite=True, workers=2)  # overwrite redoes everything
+        assert fresh.run["tasks_run"] == 8
+        assert fresh.aggregate_path.read_bytes() == reference.aggregate_path.read_bytes()
+
+
+# ---------------------------------------------------------------------------- API / CLI
+def _tilted_rmd(*, seed, m, slope):
+    """A picklable custom generator: an RMD surface plus a tilt along axis 1."""
+    s = leakpath.rmd(m, 2.3, seed=seed)
+    tilt = slope * np.arange(s.shape[1]) * s.dx
+    return leakpath.Surface(s.heights + tilt[None, :], s.dx, {"generator": "tilted"})
+
+
+class TestArguments:
+    def test_param_keys_and_product(self, tmp_path):
+        assert param_key({"m": 7, "D": 2.1}) == "D=2.1_m=7"
+        assert param_key({"shape": [64, 32], "hurst": 0.8}) == "hurst=0.8_shape=64x32"
+        with pytest.raises(ValueError, match="generator 'rmd' needs D"):
+            ensemble(params={"m": [4]}, surfaces=1, out=tmp_path / "a", progress=False)
+        with pytest.raises(ValueError, match="does not take"):
+            ensemble(
+                params={"m": 4, "D": 2.2, "H": 1}, surfaces=1, out=tmp_path / "a", progress=False
+            )
+        with pytest.raises(ValueError, match="D \\(fractal dimension\\)"):
+            ensemble(
+                params={"m": 4, "D": [2.2, 3.2]}, surfaces=1, out=tmp_path / "a", progress=False
+            )
+        with pytest.raises(ValueError, match="seeds"):
+            ensemble(params={"m": 4, "D": 2.2}, seeds=[1, 1], out=tmp_path / "a", progress=False)
+        with pytest.raises(ValueError, match="executor"):
+            ensemble(
+                params={"m": 4, "D": 2.2}, executor="threads", out=tmp_path / "a", progress=False
+            )
+        with pytest.raises(ValueError, match="workers"):
+            ensemble(
+                params={"m": 4, "D": 2.2},
+                executor="serial",
+                workers=2,
+                out=tmp_path / "a",
+                progress=False,
+            )
+        with pytest.raises(ValueError, match="picklable"):
+            ensemble(
+                generator=lambda seed, **kw: None,
+                params={"x": 1},
+                out=tmp_path / "a",
+                progress=False,
+            )
+        assert not (tmp_path / "a").exists()  # nothing created for bad arguments
+
+    def test_custom_generator(self, tmp_path):
+        r = ensemble(
+            generator=_tilted_rmd,
+            params={"m": 3, "slope": [0.0, 0.5]},
+            surfaces=2,
+            levels=2,
+            out=tmp_path / "g",
+            workers=2,
+            progress=False,
+            figures=False,
+        )
+        assert r.keys == ["m=3_slope=0.0", "m=3_slope=0.5"]
+        assert r.identity["generator"].endswith("_tilted_rmd")
+
+    def test_serial_executor_and_explicit_seeds(self, tmp_path):
+        r = ensemble(
+            params=[{"m": 3, "D": 2.4}],
+            seeds=[5, 2],
+            levels=2,
+            out=tmp_path / "s",
+            executor="serial",
+            progress=False,
+            figures=False,
+        )
+        assert r.run["executor"] == "serial"
+        assert r.param_sets[0].seeds == (2, 5)
+        assert [row["seed"] for row in r.thresholds] == [2, 5]
+        assert r.curve("D=2.4_m=3", "V_pg_star")["mean"][0] == 1.0
+
+    @pytest.mark.parametrize(
+        "argv, fragment",
+        [
+            (["--D", "2.2,abc", "--m", "4"], "comma-separated list of numbers"),
+            (["--D", "3.4", "--m", "4"], "fractal dimension"),
+            (["--D", "2.2", "--m", "4", "--surfaces", "0"], "positive integer"),
+            (["--D", "2.2", "--m", "4", "--workers", "0"], "positive integer"),
+            (
+                ["--D", "2.2", "--m", "4", "--workers", "2", "--scheduler", "tcp://x:1"],
+                "--scheduler",
+            ),
+            (["--D", "2.2", "--m", "4", "--resume", "--overwrite"], "exclude each other"),
+            (["--D", "2.2", "--m", "4", "--axis", "2"], "either"),
+        ],
+    )
+    def test_cli_usage_errors(self, argv, fragment, tmp_path, capsys):
+        code = cli.main(["ensemble", *argv, "--out", str(tmp_path / "o")])
+        err = capsys.readouterr().err
+        assert code == 2
+        lines = err.strip().splitlines()
+        assert len(lines) == 1 and lines[0].startswith("leakpath: error: ")
+        assert fragment in lines[0]
+
+    def test_cli_refuses_non_empty_out(self, tmp_path, capsys):
+        (tmp_path / "o").mkdir()
+        (tmp_path / "o" / "notes.txt").write_text("mine")
+        code = cli.main(["ensemble", "--D", "2.2", "--m", "3", "--out", str(tmp_path / "o")])
+        err = capsys.readouterr().err.strip().splitlines()
+        assert code == 2 and len(err) == 1 and "--overwrite" in err[0]
+        assert (tmp_path / "o" / "notes.txt").read_text() == "mine"
