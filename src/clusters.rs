@@ -534,7 +534,7 @@ struct Strip {
     n_comp: u32,
     /// `row_runs[r]..row_runs[r + 1]` are the strip's runs in its row `r`.
     row_runs: Vec<u32>,
-    /// Per strip component (empty unless sums were asked for).
+    /// Per strip component (empty without a gap field).
     sums: CompSums,
 }
 
@@ -556,16 +556,14 @@ impl CompSums {
     }
 
     /// Zeroed sums for `n` components, reusing pooled memory when there is some.
-    fn take(n: usize, with_gap: bool) -> Self {
+    fn take(n: usize) -> Self {
         let mut s = lock(&COMP_SUMS).pop().unwrap_or_default();
         s.area.clear();
         s.area.resize(n, 0);
         s.touch.clear();
         s.touch.resize(n, 0);
         s.gap_sum.clear();
-        if with_gap {
-            s.gap_sum.resize(n, 0.0);
-        }
+        s.gap_sum.resize(n, 0.0);
         s
     }
 
@@ -618,7 +616,8 @@ struct Setup {
 /// `bits` holds the free cells, and the *last* `R` cells of `out` hold the strip component of
 /// each of the strip's `R` runs; the rest of `out` is left as it was. (Storing them there
 /// rather than in a separate array saves allocating, and faulting in, a few bytes per cell;
-/// `finish_strip` reads them back before it overwrites them.)
+/// `finish_strip` reads them back before it overwrites them.) With a gap field, also checks
+/// that its rows are finite and sums cells, gap and edge contacts per strip component.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn label_strip<F: FreeCells>(
@@ -628,9 +627,10 @@ fn label_strip<F: FreeCells>(
     row0: usize,
     out: &mut [u32],
     bits: &mut [u64],
-    stats: bool,
     scratch: &mut Scratch,
 ) -> Result<Strip> {
+    // Sums are taken only with a gap field.
+    let stats = gap.is_some();
     let nx = setup.nx;
     let nw = words(nx);
     let rows = out.len() / nx;
@@ -689,7 +689,12 @@ fn label_strip<F: FreeCells>(
             // Each run end (one past its last cell) is met in order and paired with the next
             // run start; both come from the bit masks, so no branch depends on the cells but
             // the loops over set bits.
-            let (mut sk, mut sw) = (0usize, cur.starts.first().copied().unwrap_or(0));
+            let done = run_len.len();
+            run_len.resize(done + cur.runs as usize, 0);
+            run_gap.resize(done + cur.runs as usize, 0.0);
+            let (lens, sums) = (&mut run_len[done..], &mut run_gap[done..]);
+            let row = g_row.unwrap_or(&[]);
+            let (mut i, mut sk, mut sw) = (0, 0usize, cur.starts.first().copied().unwrap_or(0));
             for (k, &b) in cur.bits.iter().enumerate() {
                 let next = cur.bits.get(k + 1).map_or(0, |&n| n & 1);
                 let mut en = b & !((b >> 1) | (next << 63));
@@ -702,10 +707,9 @@ fn label_strip<F: FreeCells>(
                     }
                     let s = 64 * sk + sw.trailing_zeros() as usize;
                     sw &= sw - 1;
-                    run_len.push((e - s) as u32);
-                    if let Some(row) = g_row {
-                        run_gap.push(run_sum(row, s, e));
-                    }
+                    lens[i] = (e - s) as u32;
+                    sums[i] = run_sum(row, s, e);
+                    i += 1;
                 }
             }
             // Only runs on the grid's edges touch it: at most two per row, besides the first
@@ -735,19 +739,13 @@ fn label_strip<F: FreeCells>(
 
     let mut sums = CompSums::default();
     if stats {
-        sums = CompSums::take(n_comp as usize, gap.is_some());
+        sums = CompSums::take(n_comp as usize);
         for &(k, flag) in edge.iter() {
             sums.touch[comp[k as usize] as usize] |= flag;
         }
-        if gap.is_some() {
-            for ((&c, &n), &v) in comp.iter().zip(run_len.iter()).zip(run_gap.iter()) {
-                sums.area[c as usize] += u64::from(n);
-                sums.gap_sum[c as usize] += v;
-            }
-        } else {
-            for (&c, &n) in comp.iter().zip(run_len.iter()) {
-                sums.area[c as usize] += u64::from(n);
-            }
+        for ((&c, &n), &v) in comp.iter().zip(run_len.iter()).zip(run_gap.iter()) {
+            sums.area[c as usize] += u64::from(n);
+            sums.gap_sum[c as usize] += v;
         }
     }
     Ok(Strip {
@@ -768,7 +766,6 @@ fn label_strip_fast<F: FreeCells>(
     row0: usize,
     out: &mut [u32],
     bits: &mut [u64],
-    stats: bool,
     scratch: &mut Scratch,
 ) -> Result<Strip> {
     #[cfg(target_arch = "x86_64")]
@@ -782,18 +779,17 @@ fn label_strip_fast<F: FreeCells>(
             row0: usize,
             out: &mut [u32],
             bits: &mut [u64],
-            stats: bool,
             scratch: &mut Scratch,
         ) -> Result<Strip> {
-            label_strip(free, gap, setup, row0, out, bits, stats, scratch)
+            label_strip(free, gap, setup, row0, out, bits, scratch)
         }
         if std::arch::is_x86_feature_detected!("popcnt") {
             // SAFETY: a `target_feature` function may be called only on a CPU with the
             // feature, which was just checked.
-            return unsafe { with_popcnt(free, gap, setup, row0, out, bits, stats, scratch) };
+            return unsafe { with_popcnt(free, gap, setup, row0, out, bits, scratch) };
         }
     }
-    label_strip(free, gap, setup, row0, out, bits, stats, scratch)
+    label_strip(free, gap, setup, row0, out, bits, scratch)
 }
 
 /// Writes the final labels of a strip. `cluster` maps the strip's components to clusters.
@@ -861,7 +857,7 @@ fn default_strip_rows(ny: usize, nx: usize) -> usize {
     by_cells.max(by_count).clamp(1, ny.max(1))
 }
 
-/// Number of clusters and (optionally) per-cluster sums, before scaling by `dx²`.
+/// Number of clusters and (with a gap field) per-cluster sums, before scaling by `dx²`.
 #[derive(Default)]
 struct Sums {
     n_clusters: usize,
@@ -901,7 +897,6 @@ fn run<F: FreeCells>(
     free: &F,
     gap: Option<&[f64]>,
     setup: Setup,
-    stats: bool,
     strip_rows: usize,
     labels: &mut [u32],
 ) -> Result<Sums> {
@@ -910,7 +905,7 @@ fn run<F: FreeCells>(
         return Ok(Sums::default());
     }
     with_kept(&GRID, GridBuffers::bytes, |grid| {
-        run_with(free, gap, setup, stats, strip_rows, labels, grid)
+        run_with(free, gap, setup, strip_rows, labels, grid)
     })
 }
 
@@ -918,7 +913,6 @@ fn run_with<F: FreeCells>(
     free: &F,
     gap: Option<&[f64]>,
     setup: Setup,
-    stats: bool,
     strip_rows: usize,
     labels: &mut [u32],
     grid: &mut GridBuffers,
@@ -939,7 +933,7 @@ fn run_with<F: FreeCells>(
         .enumerate()
         .map(|(s, (out, b))| {
             with_kept(&SCRATCH, Scratch::bytes, |scratch| {
-                label_strip_fast(free, gap, &setup, s * strip_rows, out, b, stats, scratch)
+                label_strip_fast(free, gap, &setup, s * strip_rows, out, b, scratch)
             })
         })
         .collect::<Result<_>>()?;
@@ -997,7 +991,7 @@ fn run_with<F: FreeCells>(
         n_clusters,
         ..Sums::default()
     };
-    if stats {
+    if gap.is_some() {
         // A cluster's sums add its strip components in raster order, whatever the thread
         // count. Clusters are numbered in order of their first component, so those starting
         // in strip s are a contiguous range `first[s]..first[s + 1]`, summed by the thread
@@ -1011,37 +1005,29 @@ fn run_with<F: FreeCells>(
             .collect();
         sums.area = vec![0u64; n_clusters];
         sums.touch = vec![0u8; n_clusters];
-        sums.gap_sum = vec![0.0f64; if gap.is_some() { n_clusters } else { 0 }];
-        let with_gap = gap.is_some();
-        let area = split_at(&mut sums.area, &first);
-        let touch = split_at(&mut sums.touch, &first);
-        let mut gap_sum = if with_gap {
-            split_at(&mut sums.gap_sum, &first)
-        } else {
-            (0..n_strips).map(|_| &mut [][..]).collect()
-        };
+        sums.gap_sum = vec![0.0f64; n_clusters];
+        let pieces = split_at(&mut sums.area, &first)
+            .into_iter()
+            .zip(split_at(&mut sums.touch, &first))
+            .zip(split_at(&mut sums.gap_sum, &first));
         let late: Vec<Vec<(u32, CompSum)>> = strips
             .par_iter()
-            .zip(area)
-            .zip(touch)
-            .zip(gap_sum.par_iter_mut())
+            .zip(pieces.collect::<Vec<_>>())
             .enumerate()
-            .map(|(s, (((st, area), touch), gap_sum))| {
+            .map(|(s, (st, ((area, touch), gap_sum)))| {
                 let map = &cluster[comp_base[s] as usize..comp_base[s + 1] as usize];
                 let mut late = Vec::new();
                 for (c, &k) in map.iter().enumerate() {
                     let v = CompSum {
                         area: st.sums.area[c],
-                        gap: if with_gap { st.sums.gap_sum[c] } else { 0.0 },
+                        gap: st.sums.gap_sum[c],
                         touch: st.sums.touch[c],
                     };
                     match (k as usize).checked_sub(first[s]) {
                         Some(i) => {
                             area[i] += v.area;
                             touch[i] |= v.touch;
-                            if with_gap {
-                                gap_sum[i] += v.gap;
-                            }
+                            gap_sum[i] += v.gap;
                         }
                         None => late.push((k, v)),
                     }
@@ -1053,9 +1039,7 @@ fn run_with<F: FreeCells>(
             let k = k as usize;
             sums.area[k] += v.area;
             sums.touch[k] |= v.touch;
-            if with_gap {
-                sums.gap_sum[k] += v.gap;
-            }
+            sums.gap_sum[k] += v.gap;
         }
         CompSums::give_back(strips.into_iter().map(|st| st.sums));
     }
@@ -1104,7 +1088,7 @@ pub fn label_into<F: FreeCells>(
     check_shape("mask", free.len(), ny, nx)?;
     check_shape("labels", labels.len(), ny, nx)?;
     let s = setup(ny, nx, connectivity, periodic);
-    let sums = run(free, None, s, false, default_strip_rows(ny, nx), labels)?;
+    let sums = run(free, None, s, default_strip_rows(ny, nx), labels)?;
     Ok(sums.n_clusters)
 }
 
@@ -1182,7 +1166,7 @@ fn analyze_strips<F: FreeCells>(
             format!("must be a positive finite grid spacing, got {dx}"),
         ));
     }
-    let sums = run(free, Some(gap), setup, true, strip_rows, labels)?;
+    let sums = run(free, Some(gap), setup, strip_rows, labels)?;
     let cell = dx * dx;
     let mut volumes = sums.gap_sum;
     for v in &mut volumes {
@@ -1391,7 +1375,6 @@ mod tests {
             &FreeMask(free),
             None,
             setup(ny, nx, conn, per),
-            false,
             strip_rows,
             &mut labels,
         )
