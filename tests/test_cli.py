@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import subprocess
 import sys
 
@@ -191,6 +192,26 @@ class TestInProcess:
         assert err.startswith("leakpath: error: ") and err.count("\n") == 1
         assert cli.main(["--version"]) == 0
         assert capsys.readouterr().out.strip() == f"leakpath {leakpath.__version__}"
+
+    def test_closed_stdout_is_not_an_error(self, tmp_path):
+        # `leakpath ... | head -0`: the reader is gone before anything is written.
+        read_end, write_end = os.pipe()
+        os.close(read_end)
+        out = tmp_path / "s.npz"
+        try:
+            proc = subprocess.run(
+                [sys.executable, "-m", "leakpath", "surface", "rmd", "--m", "3", "--D", "2.4"]
+                + ["--seed", "1", "--out", str(out)],
+                stdout=write_end,
+                stderr=subprocess.PIPE,
+                text=True,
+                timeout=120,
+            )
+        finally:
+            os.close(write_end)
+        assert proc.returncode == 141
+        assert proc.stderr == ""
+        assert load(out).shape == (9, 9)
 
     def test_format_table_aligned(self):
         text = cli.format_table([("a", 1.0), ("long name", 2.5e-9), ("shape", [3, 4])])
