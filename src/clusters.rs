@@ -1089,6 +1089,36 @@ struct CompSum {
     touch: u8,
 }
 
+/// The per-cluster sums of the clusters `first..` that start in one strip.
+struct ClusterSums<'a> {
+    area: &'a mut [u64],
+    touch: &'a mut [u8],
+    gap: &'a mut [f64],
+}
+
+impl ClusterSums<'_> {
+    /// Adds a strip's component sums to their clusters (`map`), those of clusters that start in
+    /// the strip (at `first..`) in place; returns the others.
+    fn add_strip(&mut self, st: &CompSums, map: &[u32], first: usize) -> Vec<(u32, CompSum)> {
+        let mut late = Vec::new();
+        for ((&k, &[cells, gap]), &touch) in map.iter().zip(&st.sums).zip(&st.touch) {
+            // `cells` is a whole number below 2⁵²: its bits above 2⁵² are the number itself
+            // (cheaper than `as u64`, which has to saturate).
+            const BIG: f64 = (1u64 << 52) as f64;
+            let area = (cells + BIG).to_bits() - BIG.to_bits();
+            match (k as usize).checked_sub(first) {
+                Some(i) => {
+                    self.area[i] += area;
+                    self.touch[i] |= touch;
+                    self.gap[i] += gap;
+                }
+                None => late.push((k, CompSum { area, gap, touch })),
+            }
+        }
+        late
+    }
+}
+
 /// Splits `v` into the consecutive pieces `v[bounds[i]..bounds[i + 1]]` (`bounds` is
 /// non-decreasing, starts at 0 and ends at `v.len()`).
 fn split_at<'a, T>(v: &'a mut [T], bounds: &[usize]) -> Vec<&'a mut [T]> {
@@ -1234,70 +1264,58 @@ fn run_with<F: FreeCells>(
     let n_clusters = number_components(gparent, &mut grid.rank, cluster) as usize;
     let cluster: &[u32] = cluster;
 
-    labels
-        .par_chunks_mut(chunk)
-        .zip(bits.par_chunks(bit_chunk))
-        .enumerate()
-        .for_each_init(Vec::new, |lab, (s, (out, b))| {
-            let map = &cluster[comp_base[s] as usize..comp_base[s + 1] as usize];
-            finish_strip(&strips[s], out, b, nx, map, lab);
-        });
-
     let mut sums = Sums {
         n_clusters,
         ..Sums::default()
     };
-    if gap.is_some() {
-        // A cluster's sums add its strip components in raster order, whatever the thread
-        // count. Clusters are numbered in order of their first component, so those starting
-        // in strip s are a contiguous range `first[s]..first[s + 1]`, summed by the thread
-        // of strip s; components joining a cluster begun in an earlier strip are added after,
-        // strip by strip, which keeps the raster order.
-        let first: Vec<usize> = (0..=n_strips)
-            .map(|s| match comp_base[s] as usize {
-                c if c < total => grid.rank[c] as usize,
-                _ => n_clusters,
-            })
-            .collect();
+    // With a gap field, a cluster's sums add its strip components in raster order, whatever
+    // the thread count. Clusters are numbered in order of their first component, so those
+    // starting in strip s are a contiguous range `first[s]..first[s + 1]`, summed by the
+    // thread of strip s as it writes the strip's labels; components joining a cluster begun in
+    // an earlier strip are added after, strip by strip, which keeps the raster order.
+    let stats = gap.is_some();
+    let first: Vec<usize> = (0..=n_strips)
+        .map(|s| match comp_base[s] as usize {
+            c if c < total => grid.rank[c] as usize,
+            _ => n_clusters,
+        })
+        .collect();
+    let mut pieces: Vec<Option<ClusterSums>> = (0..n_strips).map(|_| None).collect();
+    if stats {
         sums.area = vec![0u64; n_clusters];
         sums.touch = vec![0u8; n_clusters];
         sums.gap_sum = vec![0.0f64; n_clusters];
-        let pieces = split_at(&mut sums.area, &first)
-            .into_iter()
-            .zip(split_at(&mut sums.touch, &first))
-            .zip(split_at(&mut sums.gap_sum, &first));
-        let late: Vec<Vec<(u32, CompSum)>> = strips
-            .par_iter()
-            .zip(pieces.collect::<Vec<_>>())
-            .enumerate()
-            .map(|(s, (st, ((area, touch), gap_sum)))| {
-                let map = &cluster[comp_base[s] as usize..comp_base[s + 1] as usize];
-                let mut late = Vec::new();
-                for (c, &k) in map.iter().enumerate() {
-                    let [cells, gap] = st.sums.sums[c];
-                    let v = CompSum {
-                        area: cells as u64,
-                        gap,
-                        touch: st.sums.touch[c],
-                    };
-                    match (k as usize).checked_sub(first[s]) {
-                        Some(i) => {
-                            area[i] += v.area;
-                            touch[i] |= v.touch;
-                            gap_sum[i] += v.gap;
-                        }
-                        None => late.push((k, v)),
-                    }
-                }
-                late
-            })
-            .collect();
-        for (k, v) in late.into_iter().flatten() {
-            let k = k as usize;
-            sums.area[k] += v.area;
-            sums.touch[k] |= v.touch;
-            sums.gap_sum[k] += v.gap;
+        let area = split_at(&mut sums.area, &first);
+        let touch = split_at(&mut sums.touch, &first);
+        let gap_sum = split_at(&mut sums.gap_sum, &first);
+        for (p, ((area, touch), gap)) in pieces
+            .iter_mut()
+            .zip(area.into_iter().zip(touch).zip(gap_sum))
+        {
+            *p = Some(ClusterSums { area, touch, gap });
         }
+    }
+    let late: Vec<Vec<(u32, CompSum)>> = labels
+        .par_chunks_mut(chunk)
+        .zip(bits.par_chunks(bit_chunk))
+        .zip(pieces)
+        .enumerate()
+        .map_init(Vec::new, |lab, (s, ((out, b), piece))| {
+            let map = &cluster[comp_base[s] as usize..comp_base[s + 1] as usize];
+            finish_strip(&strips[s], out, b, nx, map, lab);
+            match piece {
+                Some(mut p) => p.add_strip(&strips[s].sums, map, first[s]),
+                None => Vec::new(),
+            }
+        })
+        .collect();
+    for (k, v) in late.into_iter().flatten() {
+        let k = k as usize;
+        sums.area[k] += v.area;
+        sums.touch[k] |= v.touch;
+        sums.gap_sum[k] += v.gap;
+    }
+    if stats {
         CompSums::give_back(strips.into_iter().map(|st| st.sums));
     }
     Ok(sums)
