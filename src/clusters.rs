@@ -562,6 +562,9 @@ fn row_sums_avx2(gap: &[f64], pos: &[u32], out: &mut [[f64; 2]]) -> usize {
         // `out[i..i + 4]` are in bounds.
         unsafe {
             let p = gap.as_ptr();
+            // The loop reads the row from main memory: ask for it ahead of use.
+            _mm_prefetch::<_MM_HINT_T0>(p.wrapping_add(s[0] + 256).cast());
+            _mm_prefetch::<_MM_HINT_T0>(p.wrapping_add(s[0] + 264).cast());
             // Cells `o..o + 4` of the four runs, transposed: `c[j]` holds cell `o + j` of each.
             let mut c = [_mm256_setzero_pd(); W];
             for o in [0, 4] {
