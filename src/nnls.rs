@@ -269,21 +269,23 @@ impl Factor {
         self.tail = None;
         let k = self.idx.len();
         let cap = self.cap;
-        // Givens-like transforms (c_j, s_j) for the trailing columns, computed row by row.
+        // Rotations for the trailing columns, computed row by row: for column j, with
+        // c = r/l_jj, s = v/l_jj (so c² − s² = 1), l_ij ← (l_ij + s·v)/c and
+        // v ← (v − s·l_ij)/c. Kept as (1/c, s/c): the recurrence in v is then one
+        // multiply-add per column, with no division on its dependency chain.
         let mut cs: Vec<(f64, f64)> = Vec::with_capacity(k - t);
         for i in t + 1..k {
             let (head, tail) = self.l.split_at_mut(i * cap);
             let row = &mut tail[..=i];
             let mut v = row[t];
-            for (jj, &(c, s)) in cs.iter().enumerate() {
-                let j = t + 1 + jj;
-                let lij = (row[j] + s * v) / c;
-                v = c * v - s * lij;
-                row[j] = lij;
+            for (x, &(ic, sc)) in row[t + 1..i].iter_mut().zip(&cs) {
+                let lij = *x * ic + sc * v;
+                v = v * ic - sc * *x;
+                *x = lij;
             }
             let lii = row[i];
             let r = lii.hypot(v);
-            cs.push((r / lii, v / lii));
+            cs.push((lii / r, v / r));
             row[i] = r;
             // Shift into row i − 1 without column t.
             let dst = &mut head[(i - 1) * cap..(i - 1) * cap + i];

@@ -17,6 +17,32 @@ pub(crate) fn to_py(err: Error) -> PyErr {
     }
 }
 
+/// Grids with fewer cells than this are solved on one thread. Their FFTs and factor updates
+/// take tens of microseconds, about what handing a loop to the second thread costs (far more
+/// when the cores are busy), so two threads would only slow them down. Results do not depend
+/// on the thread count.
+const ONE_THREAD_BELOW: usize = 64 * 64;
+
+/// Runs a contact solve of a grid of `cells` cells on a rayon pool thread, so that its many
+/// small parallel loops fork from inside the pool instead of each being injected from outside;
+/// small grids on a kept one-thread pool (see [`ONE_THREAD_BELOW`]).
+fn on_solver_pool<T: Send>(cells: usize, f: impl FnOnce() -> T + Send) -> T {
+    static ONE_THREAD: std::sync::OnceLock<Option<rayon::ThreadPool>> = std::sync::OnceLock::new();
+    if cells < ONE_THREAD_BELOW {
+        let pool = ONE_THREAD.get_or_init(|| {
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(1)
+                .thread_name(|_| "leakpath-small-solve".into())
+                .build()
+                .ok()
+        });
+        if let Some(pool) = pool {
+            return pool.install(f);
+        }
+    }
+    rayon::scope(|_| f())
+}
+
 fn check_positive(name: &'static str, v: f64) -> PyResult<()> {
     if !(v.is_finite() && v > 0.0) {
         return Err(to_py(Error::invalid(
@@ -503,9 +529,7 @@ mod contact_py {
                     (_, Some(s)) => Start::Set(s),
                     _ => Start::Cold,
                 };
-                // Run on a pool thread: the many small parallel loops of a solve then fork
-                // from inside the pool instead of each being injected from outside.
-                rayon::scope(|_| lh.solve(approach, start, &opts, &should_stop))
+                super::on_solver_pool(ny * nx, || lh.solve(approach, start, &opts, &should_stop))
             });
             let sol = result.map_err(to_py)?;
             let seconds = t0.elapsed().as_secs_f64();
@@ -642,7 +666,7 @@ mod pk_py {
                 should_stop: Some(&stop),
             };
             catch_unwind(AssertUnwindSafe(|| {
-                rayon::scope(|_| pk::solve(&problem, control, &opts))
+                super::on_solver_pool(ny * nx, || pk::solve(&problem, control, &opts))
             }))
         });
         let seconds = start.elapsed().as_secs_f64();
