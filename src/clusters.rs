@@ -585,17 +585,15 @@ fn row_sums_avx2(gap: &[f64], pos: &[u32], out: &mut [[f64; 2]]) -> usize {
             let v = _mm256_loadu_si256(se.as_ptr().cast());
             let v = _mm256_permutevar8x32_epi32(v, _mm256_setr_epi32(0, 2, 4, 6, 1, 3, 5, 7));
             let len32 = _mm_sub_epi32(_mm256_extracti128_si256::<1>(v), _mm256_castsi256_si128(v));
-            let len = _mm256_cvtepi32_epi64(len32);
+            let cells = _mm256_cvtepi32_pd(len32);
             // Every run has at least one cell.
             let mut acc = c[0];
             for (k, &v) in c.iter().enumerate().skip(1) {
-                let m = _mm256_cmpgt_epi64(len, _mm256_set1_epi64x(k as i64));
-                acc = _mm256_add_pd(acc, _mm256_and_pd(v, _mm256_castsi256_pd(m)));
+                let m = _mm256_cmp_pd::<_CMP_GT_OQ>(cells, _mm256_set1_pd(k as f64));
+                acc = _mm256_add_pd(acc, _mm256_and_pd(v, m));
             }
-            let long = _mm256_movemask_pd(_mm256_castsi256_pd(_mm256_cmpgt_epi64(
-                len,
-                _mm256_set1_epi64x(W as i64),
-            )));
+            let long =
+                _mm256_movemask_pd(_mm256_cmp_pd::<_CMP_GT_OQ>(cells, _mm256_set1_pd(W as f64)));
             if long != 0 {
                 let mut a = [0.0; 4];
                 _mm256_storeu_pd(a.as_mut_ptr(), acc);
@@ -608,7 +606,6 @@ fn row_sums_avx2(gap: &[f64], pos: &[u32], out: &mut [[f64; 2]]) -> usize {
                 acc = _mm256_loadu_pd(a.as_ptr());
             }
             // Interleaved with the cell counts: [cells, Σ gap] per run.
-            let cells = _mm256_cvtepi32_pd(len32);
             let lo = _mm256_unpacklo_pd(cells, acc);
             let hi = _mm256_unpackhi_pd(cells, acc);
             let o = out.as_mut_ptr().add(i).cast::<f64>();
