@@ -35,7 +35,9 @@
 //!
 //! Per-cluster sums (area, free volume) are accumulated per run, then per strip component,
 //! then per cluster, always in raster order over a partition that does not depend on the
-//! thread count, so they are bit-for-bit reproducible too.
+//! thread count, so they are bit-for-bit reproducible too. Each run's sum is the plain
+//! sequential sum of its cells; with AVX2 four runs are summed at once, one per vector lane,
+//! which keeps that order.
 //!
 //! # Percolation classes
 //!
@@ -823,6 +825,7 @@ struct Setup {
 /// rather than in a separate array saves allocating, and faulting in, a few bytes per cell;
 /// `finish_strip` reads them back before it overwrites them.) With a gap field, also checks
 /// that its rows are finite and sums cells, gap and edge contacts per strip component.
+/// `AVX2`: the CPU has AVX2 (only [`label_strip_fast`] sets it).
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn label_strip<F: FreeCells, const AVX2: bool>(
@@ -989,9 +992,10 @@ fn all_finite(row: &[f64]) -> bool {
     acc.iter().fold(tail, |a, &x| a + x) == 0.0
 }
 
-/// [`label_strip`] with the POPCNT instruction when the CPU has it. Finding the run that holds a
-/// cell is a popcount, and the x86-64 baseline the wheel is built for lacks the instruction
-/// (its software fallback is about ten instructions).
+/// [`label_strip`] compiled for AVX2 (with POPCNT and BMI) or else for POPCNT, when the CPU
+/// has them. Finding the run that holds a cell is a popcount, and the x86-64 baseline the
+/// wheel is built for lacks the instruction (its software fallback is about ten
+/// instructions); the sums of the runs' gaps and the run boundaries use AVX2 vectors.
 #[allow(clippy::too_many_arguments)]
 fn label_strip_fast<F: FreeCells>(
     free: &F,
@@ -1036,7 +1040,7 @@ fn label_strip_fast<F: FreeCells>(
             && std::arch::is_x86_feature_detected!("bmi2")
             && std::arch::is_x86_feature_detected!("lzcnt")
         {
-            // SAFETY: as below.
+            // SAFETY: the CPU has every feature `with_avx2` is compiled for, just checked.
             return unsafe { with_avx2(free, gap, setup, row0, out, bits, scratch) };
         }
         if std::arch::is_x86_feature_detected!("popcnt") {
