@@ -519,10 +519,14 @@ static BIT_POS: [[u8; 8]; 256] = {
 /// [`boundaries`], eight cells at a time from a table of the set bits of each byte: no
 /// data-dependent branch, while a loop over set bits ends after a data-dependent count and
 /// mispredicts.
+///
+/// # Safety
+///
+/// The CPU must have AVX2.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 #[inline]
-fn boundaries_avx2(bits: &[u64], pos: &mut [u32]) -> usize {
+unsafe fn boundaries_avx2(bits: &[u64], pos: &mut [u32]) -> usize {
     use std::arch::x86_64::*;
     let (mut n, mut carry) = (0, 0);
     for (k, &b) in bits.iter().enumerate() {
@@ -549,10 +553,14 @@ fn boundaries_avx2(bits: &[u64], pos: &mut [u32]) -> usize {
 /// order, lane by lane, so each lane is the sequential sum of its run. Returns how many runs it
 /// did, from the first; it stops where the next four runs' windows would pass the end of
 /// `gap`.
+///
+/// # Safety
+///
+/// The CPU must have AVX2.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 #[inline]
-fn row_sums_avx2(gap: &[f64], pos: &[u32], out: &mut [[f64; 2]]) -> usize {
+unsafe fn row_sums_avx2(gap: &[f64], pos: &[u32], out: &mut [[f64; 2]]) -> usize {
     use std::arch::x86_64::*;
     const W: usize = 8;
     let n = (pos.len() / 2).min(out.len());
@@ -1286,9 +1294,14 @@ fn run_with<F: FreeCells>(
         .collect();
     let mut pieces: Vec<Option<ClusterSums>> = (0..n_strips).map(|_| None).collect();
     if stats {
-        sums.area = vec![0u64; n_clusters];
-        sums.touch = vec![0u8; n_clusters];
-        sums.gap_sum = vec![0.0f64; n_clusters];
+        // Zeroed in parallel: fresh memory is faulted in on first touch, a good part of the
+        // cost on virtual machines.
+        sums.area
+            .par_extend(rayon::iter::repeat_n(0u64, n_clusters));
+        sums.touch
+            .par_extend(rayon::iter::repeat_n(0u8, n_clusters));
+        sums.gap_sum
+            .par_extend(rayon::iter::repeat_n(0.0f64, n_clusters));
         let area = split_at(&mut sums.area, &first);
         let touch = split_at(&mut sums.touch, &first);
         let gap_sum = split_at(&mut sums.gap_sum, &first);
@@ -1533,40 +1546,56 @@ pub fn class_of(t: u8, flow: Flow, periodic: Periodic) -> u8 {
 }
 
 /// Classifies the clusters for flow along `flow` (see the module docs).
+///
+/// Each class's sums and the free volume are taken in a pass of their own, the four in
+/// parallel: every compensated sum still adds its volumes in cluster order, so the totals do
+/// not depend on the thread count.
 pub fn classify(clusters: &Clusters, flow: Flow) -> Result<Classification> {
     flow.check_periodic(clusters.periodic)?;
+    let table: [u8; 16] = std::array::from_fn(|t| class_of(t as u8, flow, clusters.periodic));
     let classes: Vec<u8> = clusters
         .touches
-        .iter()
-        .map(|&t| class_of(t, flow, clusters.periodic))
+        .par_iter()
+        .map(|&t| table[usize::from(t & 15)])
         .collect();
-    let mut vol = [Compensated::default(); 4];
-    let mut area = [0u64; 4];
-    let mut count = [0usize; 4];
-    let mut total = Compensated::default();
-    for ((&c, &v), &a) in classes.iter().zip(&clusters.volumes).zip(&clusters.areas) {
-        vol[c as usize].add(v);
-        area[c as usize] += a;
-        count[c as usize] += 1;
-        total.add(v);
-    }
-    let s = SPANNING as usize;
-    let d = DEAD_END as usize;
-    let t = TRAPPED as usize;
+    let volumes = &clusters.volumes;
+    // Volume, cells and count of the clusters of class `want`.
+    let of_class = |want: u8| {
+        let (mut vol, mut area, mut count) = (Compensated::default(), 0u64, 0usize);
+        for ((&c, &v), &a) in classes.iter().zip(volumes).zip(&clusters.areas) {
+            if c == want {
+                vol.add(v);
+                area += a;
+                count += 1;
+            }
+        }
+        (vol.value(), area, count)
+    };
+    let total = || {
+        let mut total = Compensated::default();
+        for &v in volumes {
+            total.add(v);
+        }
+        total.value()
+    };
+    let ((spanning, dead_end), (trapped, free_volume)) = rayon::join(
+        || rayon::join(|| of_class(SPANNING), || of_class(DEAD_END)),
+        || rayon::join(|| of_class(TRAPPED), total),
+    );
     Ok(Classification {
         flow,
         classes,
-        spanning_volume: vol[s].value(),
-        dead_end_volume: vol[d].value(),
-        trapped_volume: vol[t].value(),
-        free_volume: total.value(),
-        spanning_area: area[s],
-        dead_end_area: area[d],
-        trapped_area: area[t],
-        free_area: area[s] + area[d] + area[t],
-        n_spanning: count[s],
-        n_dead_end: count[d],
-        n_trapped: count[t],
+        spanning_volume: spanning.0,
+        dead_end_volume: dead_end.0,
+        trapped_volume: trapped.0,
+        free_volume,
+        spanning_area: spanning.1,
+        dead_end_area: dead_end.1,
+        trapped_area: trapped.1,
+        free_area: spanning.1 + dead_end.1 + trapped.1,
+        n_spanning: spanning.2,
+        n_dead_end: dead_end.2,
+        n_trapped: trapped.2,
     })
 }
 
