@@ -683,24 +683,6 @@ def _ensemble_list(kind: Callable[[str], Any], what: str) -> Callable[[str], lis
     return parse
 
 
-def _ensemble_count(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        value = 0
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
-    return value
-
-
-def _ensemble_axis(text: str) -> int | str:
-    if text in ("0", "1"):
-        return int(text)
-    if text in ("either", "both"):
-        return text
-    raise argparse.ArgumentTypeError(f"expected 0, 1, either or both, got {text!r}")
-
-
 def _ensemble_summary_rows(result: Any) -> list[tuple[str, Any]]:
     run = result.run or {}
     rows: list[tuple[str, Any]] = [
@@ -796,20 +778,20 @@ def _add_ensemble_parser(subparsers: Any) -> None:
     )
     p.add_argument(
         "--surfaces",
-        type=_ensemble_count,
+        type=_positive_int,
         default=50,
         help="surfaces per parameter set, seeds 0..N-1 (default 50)",
     )
     p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output directory")
     p.add_argument(
-        "--levels", type=_ensemble_count, default=20, help="approach steps per sweep (default 20)"
+        "--levels", type=_positive_int, default=20, help="approach steps per sweep (default 20)"
     )
     p.add_argument(
         "--solver", choices=SOLVERS, default="auto", help="contact solver (default auto)"
     )
     p.add_argument(
         "--axis",
-        type=_ensemble_axis,
+        type=_axis_arg,
         default=0,
         help="flow axis for V_pg and the threshold: 0, 1, either, both (default 0)",
     )
@@ -818,7 +800,7 @@ def _add_ensemble_parser(subparsers: Any) -> None:
     )
     p.add_argument(
         "--workers",
-        type=_ensemble_count,
+        type=_positive_int,
         default=None,
         help="local worker processes (default: all CPUs), one rayon thread each",
     )

@@ -147,7 +147,7 @@ import numpy as np
 from . import __version__
 from .contact import SOLVERS
 from .surfaces import Surface
-from .sweep import atomic_write_bytes, atomic_write_text, machine_info
+from .sweep import _dumps, atomic_write_bytes, atomic_write_text, machine_info
 from .sweep import sweep as _sweep
 
 __all__ = [
@@ -217,26 +217,6 @@ _KILL_ENV = "LEAKPATH_TEST_KILL_ONCE"
 _STOP_ENV = "LEAKPATH_TEST_STOP_AFTER"
 _THREAD_ENV = ("RAYON_NUM_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 _AXES: tuple[Any, ...] = (0, 1, "either", "both")
-
-
-def _json_safe(value: Any) -> Any:
-    """JSON-safe copy: non-finite floats → ``None``, numpy scalars → Python, paths → str."""
-    if isinstance(value, np.generic):
-        value = value.item()
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    if isinstance(value, Mapping):
-        return {str(k): _json_safe(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_json_safe(v) for v in value]
-    if isinstance(value, os.PathLike):
-        return os.fspath(value)
-    return value
-
-
-def _dumps(obj: Any) -> str:
-    """Strict JSON text (indent 1, UTF-8, non-finite numbers as null)."""
-    return json.dumps(_json_safe(obj), indent=1, allow_nan=False, ensure_ascii=False) + "\n"
 
 
 # ============================================================================ Student t
