@@ -102,33 +102,47 @@ impl Kernel {
         self.table[ia.abs_diff(ib) * self.nx + ja.abs_diff(jb)]
     }
 
+    /// Grid coordinates `(row, column)` of flat indices: the block builders divide once per
+    /// point, not once per entry.
+    pub fn coords(&self, idx: &[usize]) -> Vec<(usize, usize)> {
+        idx.iter().map(|&a| (a / self.nx, a % self.nx)).collect()
+    }
+
+    /// Influence coefficient between grid points given by coordinates (see [`Kernel::coords`]).
+    #[inline]
+    pub fn coeff_at(&self, (ia, ja): (usize, usize), (ib, jb): (usize, usize)) -> f64 {
+        self.table[ia.abs_diff(ib) * self.nx + ja.abs_diff(jb)]
+    }
+
+    /// Fill the column-major block `C_{rows, cols}` into `out`.
+    fn fill(&self, rows: &[usize], cols: &[usize], out: &mut [f64]) {
+        let m = rows.len();
+        let rc = self.coords(rows);
+        let nx = self.nx;
+        let table = &self.table[..];
+        let fill_col = |(c, col): (usize, &mut [f64])| {
+            let (ib, jb) = (cols[c] / nx, cols[c] % nx);
+            for (v, &(ia, ja)) in col.iter_mut().zip(&rc) {
+                *v = table[ia.abs_diff(ib) * nx + ja.abs_diff(jb)];
+            }
+        };
+        // Small blocks are filled in the calling thread: waking a second one costs more.
+        if m * cols.len() < 1 << 15 {
+            out.chunks_mut(m.max(1)).enumerate().for_each(fill_col);
+        } else {
+            out.par_chunks_mut(m.max(1)).enumerate().for_each(fill_col);
+        }
+    }
+
     /// The dense block `C_PP` for the flat indices `idx`, column-major `k × k`.
     pub fn block(&self, idx: &[usize]) -> Vec<f64> {
-        let k = idx.len();
-        let mut out = vec![0.0; k * k];
-        out.par_chunks_mut(k.max(1))
-            .enumerate()
-            .for_each(|(c, col)| {
-                let b = idx[c];
-                for (r, v) in col.iter_mut().enumerate() {
-                    *v = self.coeff(idx[r], b);
-                }
-            });
-        out
+        self.cross_block(idx, idx)
     }
 
     /// The block `C_{rows, cols}`, column-major `rows.len() × cols.len()`.
     pub fn cross_block(&self, rows: &[usize], cols: &[usize]) -> Vec<f64> {
-        let m = rows.len();
-        let mut out = vec![0.0; m * cols.len()];
-        out.par_chunks_mut(m.max(1))
-            .enumerate()
-            .for_each(|(c, col)| {
-                let b = cols[c];
-                for (r, v) in col.iter_mut().enumerate() {
-                    *v = self.coeff(rows[r], b);
-                }
-            });
+        let mut out = vec![0.0; rows.len() * cols.len()];
+        self.fill(rows, cols, &mut out);
         out
     }
 }

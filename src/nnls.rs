@@ -25,11 +25,14 @@
 //! passive set with a strictly lower objective, so it terminates at the same unique minimiser
 //! (C is SPD) — with far fewer, cache-friendly factor updates.
 
+use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::linalg::cholesky::llt::factor::{cholesky_in_place, cholesky_in_place_scratch};
 use faer::linalg::matmul::matmul;
+use faer::linalg::matmul::triangular::{matmul as matmul_tri, BlockStructure};
 use faer::linalg::triangular_solve::{
     solve_lower_triangular_in_place, solve_upper_triangular_in_place,
 };
-use faer::{Accum, Mat, MatMut, MatRef, Par, Side};
+use faer::{Accum, Mat, MatMut, MatRef, Par};
 use rayon::prelude::*;
 
 use crate::error::{Error, Result};
@@ -70,6 +73,11 @@ pub struct Factor {
     /// The last appended block's `R = L⁻¹ C_PJ` (column-major) and `S = C_JJ − RᵀR`, so
     /// points of that block can be dropped again without redoing the TRSM.
     tail: Option<Tail>,
+    /// `y = L⁻¹ b_P` for the current right-hand side; its first `fwd_ok` entries are valid.
+    /// Row `i` of `L` only depends on the points up to `i`, so appending keeps that prefix
+    /// and a solve then only forward-substitutes the new rows.
+    fwd: Vec<f64>,
+    fwd_ok: usize,
 }
 
 struct Tail {
@@ -87,7 +95,14 @@ impl Factor {
             pos: vec![NOT_IN_P; n_points],
             memory_limit,
             tail: None,
+            fwd: Vec::new(),
+            fwd_ok: 0,
         }
+    }
+
+    /// Forget the cached forward solve (the right-hand side changed).
+    pub fn new_rhs(&mut self) {
+        self.fwd_ok = 0;
     }
 
     pub fn len(&self) -> usize {
@@ -142,6 +157,7 @@ impl Factor {
 
     pub fn clear(&mut self) {
         self.tail = None;
+        self.fwd_ok = 0;
         for &i in &self.idx {
             self.pos[i] = NOT_IN_P;
         }
@@ -162,21 +178,25 @@ impl Factor {
             let rm = MatMut::from_column_major_slice_mut(&mut r, k, nb);
             solve_lower_triangular_in_place(self.lower(k), rm, par_for(k * nb));
         }
-        let mut s = Mat::<f64>::zeros(nb, nb);
-        s.par_col_chunks_mut(1)
-            .enumerate()
-            .for_each(|(b, mut col)| {
-                for a in 0..nb {
-                    col[(a, 0)] = kernel.coeff(new[a], new[b]);
-                }
-            });
+        // Only the lower triangle of S is formed and read (the Cholesky below reads no more).
+        let jc = kernel.coords(new);
+        let mut s = Mat::<f64>::from_fn(nb, nb, |a, b| {
+            if a >= b {
+                kernel.coeff_at(jc[a], jc[b])
+            } else {
+                0.0
+            }
+        });
         if k > 0 {
             let rr = MatRef::from_column_major_slice(&r, k, nb);
-            matmul(
+            matmul_tri(
                 s.as_mut(),
+                BlockStructure::TriangularLower,
                 Accum::Add,
                 rr.transpose(),
+                BlockStructure::Rectangular,
                 rr,
+                BlockStructure::Rectangular,
                 -1.0,
                 par_for(k * nb),
             );
@@ -186,25 +206,44 @@ impl Factor {
         Ok(())
     }
 
-    /// Factor `S` and write the rows `[Rᵀ, L_JJ]` after position `k`.
+    /// Factor `S` (lower triangle) and write the rows `[Rᵀ, L_JJ]` after position `k`.
     fn write_tail(&mut self, k: usize, new: &[usize], r: &[f64], s: &Mat<f64>) -> Result<()> {
         let nb = new.len();
-        let llt = s.llt(Side::Lower).map_err(|_| Error::NotConverged {
+        // Factored in a contiguous column-major copy: faer 0.24's in-place Cholesky gives wrong
+        // results on a row-major view whose row stride exceeds its width (the factor's rows).
+        let mut ljj = s.clone();
+        let par = par_for(nb * nb);
+        let mut mem = MemBuffer::new(cholesky_in_place_scratch::<f64>(
+            nb,
+            par,
+            Default::default(),
+        ));
+        cholesky_in_place(
+            ljj.as_mut(),
+            Default::default(),
+            par,
+            MemStack::new(&mut mem),
+            Default::default(),
+        )
+        .map_err(|_| Error::NotConverged {
             iterations: 0,
             residual: f64::NAN,
             what: "Cholesky update of the contact block (lost positive definiteness)".into(),
         })?;
-        let ljj = llt.L();
         let cap = self.cap;
-        self.l[k * cap..(k + nb) * cap]
-            .par_chunks_mut(cap)
-            .enumerate()
-            .for_each(|(t, row)| {
-                row[..k].copy_from_slice(&r[t * k..(t + 1) * k]);
-                for c in 0..=t {
-                    row[k + c] = ljj[(t, c)];
-                }
-            });
+        self.fwd_ok = self.fwd_ok.min(k);
+        let rows = &mut self.l[k * cap..(k + nb) * cap];
+        let copy_row = |(t, row): (usize, &mut [f64])| {
+            row[..k].copy_from_slice(&r[t * k..(t + 1) * k]);
+            for c in 0..=t {
+                row[k + c] = ljj[(t, c)];
+            }
+        };
+        if nb * (k + nb) < 1 << 16 {
+            rows.chunks_mut(cap).enumerate().for_each(copy_row);
+        } else {
+            rows.par_chunks_mut(cap).enumerate().for_each(copy_row);
+        }
         for &i in &self.idx[k..] {
             self.pos[i] = NOT_IN_P;
         }
@@ -241,7 +280,14 @@ impl Factor {
         for &t in &sel {
             r.extend_from_slice(&tail.r[t * k..(t + 1) * k]);
         }
-        let s = Mat::<f64>::from_fn(sel.len(), sel.len(), |a, b| tail.s[(sel[a], sel[b])]);
+        // Lower triangle only, as `append` left it (sel is increasing, so a ≥ b ⇒ sel[a] ≥ sel[b]).
+        let s = Mat::<f64>::from_fn(sel.len(), sel.len(), |a, b| {
+            if a >= b {
+                tail.s[(sel[a], sel[b])]
+            } else {
+                0.0
+            }
+        });
         if new.is_empty() {
             self.truncate(k);
             return Ok(());
@@ -256,6 +302,7 @@ impl Factor {
         if self.tail.as_ref().is_some_and(|t| t.k0 != k) {
             self.tail = None;
         }
+        self.fwd_ok = self.fwd_ok.min(k);
         for &i in &self.idx[k..] {
             self.pos[i] = NOT_IN_P;
         }
@@ -267,6 +314,7 @@ impl Factor {
     /// every access is contiguous. O((k − t)·k).
     pub fn remove_at(&mut self, t: usize) {
         self.tail = None;
+        self.fwd_ok = self.fwd_ok.min(t);
         let k = self.idx.len();
         let cap = self.cap;
         // Rotations for the trailing columns, computed row by row: for column j, with
@@ -325,6 +373,53 @@ impl Factor {
             self.append(kernel, &again, k_bound)?;
         }
         Ok(())
+    }
+
+    /// `z = C_PP⁻¹ b_P` for the grid vector `b`, reusing the valid prefix of `L⁻¹ b_P`
+    /// (callers announce a new `b` with [`Factor::new_rhs`]).
+    pub fn solve_rhs(&mut self, b: &[f64], z: &mut Vec<f64>) {
+        let k = self.idx.len();
+        z.clear();
+        if k == 0 {
+            return;
+        }
+        let m = self.fwd_ok.min(k);
+        self.fwd.resize(k, 0.0);
+        for (y, &i) in self.fwd[m..].iter_mut().zip(&self.idx[m..]) {
+            *y = b[i];
+        }
+        if m < k {
+            let (head, tail) = self.fwd.split_at_mut(m);
+            let l = MatRef::from_row_major_slice_with_stride(
+                &self.l[..(k - 1) * self.cap + k],
+                k,
+                k,
+                self.cap,
+            );
+            let mut y_new = MatMut::from_column_major_slice_mut(tail, k - m, 1);
+            if m > 0 {
+                matmul(
+                    y_new.as_mut(),
+                    Accum::Add,
+                    l.submatrix(m, 0, k - m, m),
+                    MatRef::from_column_major_slice(head, m, 1),
+                    -1.0,
+                    par_for((k - m) * m / 64),
+                );
+            }
+            solve_lower_triangular_in_place(
+                l.submatrix(m, m, k - m, k - m),
+                y_new,
+                par_for((k - m) * (k - m) / 64),
+            );
+            self.fwd_ok = k;
+        }
+        z.extend_from_slice(&self.fwd);
+        solve_upper_triangular_in_place(
+            self.lower(k).transpose(),
+            MatMut::from_column_major_slice_mut(z.as_mut_slice(), k, 1),
+            par_for(k * k / 64),
+        );
     }
 
     /// Solve `C_PP x = rhs` in place.
@@ -463,6 +558,7 @@ impl<'a> LawsonHanson<'a> {
         let mut p = vec![0.0; n];
         let mut u = vec![0.0; n];
         let mut iterations = 0usize;
+        self.factor.new_rhs();
         match start {
             Start::Cold => self.factor.clear(),
             Start::Previous => {}
@@ -481,8 +577,8 @@ impl<'a> LawsonHanson<'a> {
             if k == 0 {
                 break;
             }
-            let mut z: Vec<f64> = self.factor.idx.iter().map(|&i| b[i]).collect();
-            self.factor.solve(&mut z);
+            let mut z = Vec::new();
+            self.factor.solve_rhs(&b, &mut z);
             let keep: Vec<bool> = z.iter().map(|&v| v > 0.0).collect();
             if keep.iter().all(|&x| x) {
                 for (&i, &zi) in self.factor.idx.iter().zip(&z) {
@@ -543,9 +639,7 @@ impl<'a> LawsonHanson<'a> {
             // Inner loop: minimise on P, stepping back to feasibility.
             loop {
                 let k = self.factor.len();
-                z.clear();
-                z.extend(self.factor.idx.iter().map(|&i| b[i]));
-                self.factor.solve(&mut z);
+                self.factor.solve_rhs(&b, &mut z);
                 // New points whose trial pressure is not positive leave first (α = 0 steps).
                 let new_start = k - new.len();
                 if z[new_start..].iter().any(|&v| v <= 0.0) {
@@ -714,6 +808,72 @@ mod tests {
         {
             run(ny, nx, s as u64 + 1, f, Pivoting::Single);
             run(ny, nx, s as u64 + 1, f, Pivoting::Block);
+        }
+    }
+
+    /// `C_PP⁻¹ b_P` by a fresh dense Cholesky of the block built directly from the kernel.
+    fn dense_solve(ker: &Kernel, idx: &[usize], b: &[f64]) -> Vec<f64> {
+        let k = idx.len();
+        let c = ker.block(idx);
+        let cm = Mat::<f64>::from_fn(k, k, |a, bb| c[a + k * bb]);
+        let rhs = Mat::<f64>::from_fn(k, 1, |a, _| b[idx[a]]);
+        let x = faer::linalg::solvers::Solve::solve(&cm.llt(faer::Side::Lower).unwrap(), &rhs);
+        (0..k).map(|a| x[(a, 0)]).collect()
+    }
+
+    #[test]
+    fn cached_forward_solve_survives_every_update() {
+        // Every way the factor changes (block appends, tail shrinks, rank-one removals,
+        // truncation, retain by re-append) must leave `solve_rhs` equal to a fresh solve.
+        let (ny, nx) = (11, 13);
+        let n = ny * nx;
+        let ker = Kernel::new(ny, nx, 0.7, 2.0);
+        let b = lcg(11, n);
+        let order: Vec<usize> = {
+            let keys = lcg(12, n);
+            let mut o: Vec<usize> = (0..n).collect();
+            o.sort_by(|&a, &c| keys[a].total_cmp(&keys[c]));
+            o
+        };
+        let mut f = Factor::new(n, 1 << 30);
+        f.new_rhs();
+        let mut z = Vec::new();
+        let check = |f: &mut Factor, z: &mut Vec<f64>, step: &str| {
+            f.solve_rhs(&b, z);
+            let want = dense_solve(&ker, &f.idx, &b);
+            let scale = want.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+            for (t, (x, w)) in z.iter().zip(&want).enumerate() {
+                assert!((x - w).abs() <= 1e-10 * scale, "{step}: z[{t}] {x} vs {w}");
+            }
+        };
+        let mut at = 0;
+        for (round, nb) in [7usize, 1, 20, 3, 33].into_iter().enumerate() {
+            f.append(&ker, &order[at..at + nb], n).unwrap();
+            at += nb;
+            check(&mut f, &mut z, "append");
+            if nb > 2 {
+                let keep: Vec<bool> = (0..nb).map(|t| (t + round) % 3 != 0).collect();
+                f.shrink_tail(&ker, &keep, n).unwrap();
+                check(&mut f, &mut z, "shrink_tail");
+            }
+            if f.len() > 5 {
+                f.remove_at(f.len() / 3);
+                check(&mut f, &mut z, "remove_at");
+                let keep: Vec<bool> = (0..f.len()).map(|t| t % 5 != 1).collect();
+                f.retain(&ker, &keep, n).unwrap();
+                check(&mut f, &mut z, "retain");
+            }
+        }
+        let k = f.len();
+        f.truncate(k / 2);
+        check(&mut f, &mut z, "truncate");
+        // A new right-hand side must not reuse the old forward solve.
+        let b2: Vec<f64> = b.iter().map(|v| 1.0 - v).collect();
+        f.new_rhs();
+        f.solve_rhs(&b2, &mut z);
+        let want = dense_solve(&ker, &f.idx, &b2);
+        for (x, w) in z.iter().zip(&want) {
+            assert!((x - w).abs() <= 1e-10 * w.abs().max(1.0));
         }
     }
 
