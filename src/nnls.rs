@@ -594,15 +594,22 @@ impl<'a> LawsonHanson<'a> {
         let mut skipped: Vec<usize> = Vec::new();
         let mut z: Vec<f64> = Vec::new();
         loop {
-            self.op.apply(&p, &mut u);
+            // u = C p (zero while p is: a cold start needs no product).
+            if self.factor.is_empty() && p.iter().all(|&v| v == 0.0) {
+                u.fill(0.0);
+            } else {
+                self.op.apply(&p, &mut u);
+            }
             // w = b − u = −g on free points; the violators sorted by interpenetration.
-            let mut viol: Vec<(f64, usize)> = (0..n)
-                .into_par_iter()
-                .filter_map(|i| {
-                    let w = b[i] - u[i];
-                    (w > tol_abs && !self.factor.contains(i) && !skip[i]).then_some((w, i))
-                })
-                .collect();
+            let violation = |i: usize| {
+                let w = b[i] - u[i];
+                (w > tol_abs && !self.factor.contains(i) && !skip[i]).then_some((w, i))
+            };
+            let mut viol: Vec<(f64, usize)> = if n < 1 << 14 {
+                (0..n).filter_map(violation).collect()
+            } else {
+                (0..n).into_par_iter().filter_map(violation).collect()
+            };
             if viol.is_empty() {
                 break;
             }
@@ -718,8 +725,7 @@ impl<'a> LawsonHanson<'a> {
                 }
             }
         }
-        // Final displacement and gap from the final pressure.
-        self.op.apply(&p, &mut u);
+        // The loop ended right after computing u = C p for the final p.
         let gap: Vec<f64> = (0..n).map(|i| u[i] - b[i]).collect();
         let kkt = kkt_certificate(&p, &gap, scale);
         let n_contact = p.iter().filter(|&&v| v > 0.0).count();
