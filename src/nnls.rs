@@ -18,6 +18,8 @@
 //! `C` is never stored: `C_PP` rows come from the Love kernel table, `w` from the FFT operator.
 //! The factor is updated, not recomputed, when points enter (a forward solve per point, or a
 //! blocked TRSM + Cholesky of the new block) or leave (a row-wise rank-one update, O(k²)).
+//! The forward half of each solve, `L⁻¹ b_P`, is kept: rows of `L` depend only on the points
+//! before them, so after an append only the new rows are forward-substituted.
 //!
 //! `Pivoting::Block` adds many of the most-interpenetrating free points per outer iteration
 //! (dropping those whose trial pressure is not positive, falling back to a single Lawson–Hanson
@@ -180,38 +182,51 @@ impl Factor {
         }
         // Only the lower triangle of S is formed and read (the Cholesky below reads no more).
         let jc = kernel.coords(new);
-        let mut s = Mat::<f64>::from_fn(nb, nb, |a, b| {
-            if a >= b {
-                kernel.coeff_at(jc[a], jc[b])
-            } else {
-                0.0
+        let mut s = Mat::<f64>::zeros(nb, nb);
+        if nb * nb < 1 << 16 {
+            for b in 0..nb {
+                for a in b..nb {
+                    s[(a, b)] = kernel.coeff_at(jc[a], jc[b]);
+                }
             }
-        });
-        if k > 0 {
-            let rr = MatRef::from_column_major_slice(&r, k, nb);
-            matmul_tri(
-                s.as_mut(),
-                BlockStructure::TriangularLower,
-                Accum::Add,
-                rr.transpose(),
-                BlockStructure::Rectangular,
-                rr,
-                BlockStructure::Rectangular,
-                -1.0,
-                par_for(k * nb),
-            );
+        } else {
+            s.par_col_chunks_mut(1)
+                .enumerate()
+                .for_each(|(b, mut col)| {
+                    for a in b..nb {
+                        col[(a, 0)] = kernel.coeff_at(jc[a], jc[b]);
+                    }
+                });
         }
-        self.write_tail(k, new, &r, &s)?;
+        if k == 0 {
+            // S = C_JJ: dropping points of this block again is a plain re-append (there is no
+            // TRSM to save), so S is factored in place rather than kept.
+            self.tail = None;
+            return self.write_tail(k, new, &r, s);
+        }
+        let rr = MatRef::from_column_major_slice(&r, k, nb);
+        matmul_tri(
+            s.as_mut(),
+            BlockStructure::TriangularLower,
+            Accum::Add,
+            rr.transpose(),
+            BlockStructure::Rectangular,
+            rr,
+            BlockStructure::Rectangular,
+            -1.0,
+            par_for(k * nb),
+        );
+        self.write_tail(k, new, &r, s.clone())?;
         self.tail = Some(Tail { k0: k, r, s });
         Ok(())
     }
 
     /// Factor `S` (lower triangle) and write the rows `[Rᵀ, L_JJ]` after position `k`.
-    fn write_tail(&mut self, k: usize, new: &[usize], r: &[f64], s: &Mat<f64>) -> Result<()> {
+    /// `S` is factored in its own contiguous column-major storage: faer 0.24's in-place
+    /// Cholesky gives wrong results on a row-major view whose row stride exceeds its width,
+    /// which is what the factor's rows are.
+    fn write_tail(&mut self, k: usize, new: &[usize], r: &[f64], mut ljj: Mat<f64>) -> Result<()> {
         let nb = new.len();
-        // Factored in a contiguous column-major copy: faer 0.24's in-place Cholesky gives wrong
-        // results on a row-major view whose row stride exceeds its width (the factor's rows).
-        let mut ljj = s.clone();
         let par = par_for(nb * nb);
         let mut mem = MemBuffer::new(cholesky_in_place_scratch::<f64>(
             nb,
@@ -292,7 +307,7 @@ impl Factor {
             self.truncate(k);
             return Ok(());
         }
-        self.write_tail(k, &new, &r, &s)?;
+        self.write_tail(k, &new, &r, s.clone())?;
         self.tail = Some(Tail { k0: k, r, s });
         Ok(())
     }
