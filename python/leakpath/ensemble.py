@@ -705,7 +705,11 @@ def _run_task_dask(spec: _TaskSpec, threads: int | None) -> _TaskOutput:
 
 
 def _watch_driver(driver_pid: int, interval: float) -> None:
-    """Exit this worker as soon as the driver process is gone (never returns otherwise)."""
+    """Exit this worker as soon as the driver process is gone (never returns otherwise).
+
+    Workers come from a fork server, so their parent is not the driver: the driver is
+    probed by its process id instead.
+    """
     while True:
         time.sleep(interval)
         try:
@@ -724,8 +728,8 @@ def _init_worker(threads: int, driver_pid: int | None = None) -> None:
     Rust routine ran — takes effect. BLAS libraries read their variables when numpy is
     loaded; leakpath's hot loops do not use BLAS, so those are set for any child processes.
 
-    With ``driver_pid``, a daemon thread ends the worker within a second of the driver's
-    death (a killed driver cannot shut its pool down; the workers would otherwise wait
+    With ``driver_pid``, a daemon thread ends the worker within a quarter of a second of the
+    driver's death (a killed driver cannot shut its pool down; the workers would otherwise wait
     for work forever).
     """
     for name in _THREAD_ENV:
@@ -735,7 +739,7 @@ def _init_worker(threads: int, driver_pid: int | None = None) -> None:
 
         threading.Thread(
             target=_watch_driver,
-            args=(driver_pid, 1.0),
+            args=(driver_pid, 0.25),
             name="leakpath-driver-watch",
             daemon=True,
         ).start()
