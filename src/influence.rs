@@ -97,9 +97,7 @@ impl Kernel {
     /// Influence coefficient between flat indices `a` and `b` of the `ny × nx` grid.
     #[inline]
     pub fn coeff(&self, a: usize, b: usize) -> f64 {
-        let (ia, ja) = (a / self.nx, a % self.nx);
-        let (ib, jb) = (b / self.nx, b % self.nx);
-        self.table[ia.abs_diff(ib) * self.nx + ja.abs_diff(jb)]
+        self.coeff_at((a / self.nx, a % self.nx), (b / self.nx, b % self.nx))
     }
 
     /// Grid coordinates `(row, column)` of flat indices: the block builders divide once per
@@ -114,16 +112,20 @@ impl Kernel {
         self.table[ia.abs_diff(ib) * self.nx + ja.abs_diff(jb)]
     }
 
-    /// Fill the column-major block `C_{rows, cols}` into `out`.
-    fn fill(&self, rows: &[usize], cols: &[usize], out: &mut [f64]) {
+    /// The dense block `C_PP` for the flat indices `idx`, column-major `k × k`.
+    pub fn block(&self, idx: &[usize]) -> Vec<f64> {
+        self.cross_block(idx, idx)
+    }
+
+    /// The block `C_{rows, cols}`, column-major `rows.len() × cols.len()`.
+    pub fn cross_block(&self, rows: &[usize], cols: &[usize]) -> Vec<f64> {
         let m = rows.len();
+        let mut out = vec![0.0; m * cols.len()];
         let rc = self.coords(rows);
-        let nx = self.nx;
-        let table = &self.table[..];
         let fill_col = |(c, col): (usize, &mut [f64])| {
-            let (ib, jb) = (cols[c] / nx, cols[c] % nx);
-            for (v, &(ia, ja)) in col.iter_mut().zip(&rc) {
-                *v = table[ia.abs_diff(ib) * nx + ja.abs_diff(jb)];
+            let cc = (cols[c] / self.nx, cols[c] % self.nx);
+            for (v, &rr) in col.iter_mut().zip(&rc) {
+                *v = self.coeff_at(rr, cc);
             }
         };
         // Small blocks are filled in the calling thread: waking a second one costs more.
@@ -132,17 +134,6 @@ impl Kernel {
         } else {
             out.par_chunks_mut(m.max(1)).enumerate().for_each(fill_col);
         }
-    }
-
-    /// The dense block `C_PP` for the flat indices `idx`, column-major `k × k`.
-    pub fn block(&self, idx: &[usize]) -> Vec<f64> {
-        self.cross_block(idx, idx)
-    }
-
-    /// The block `C_{rows, cols}`, column-major `rows.len() × cols.len()`.
-    pub fn cross_block(&self, rows: &[usize], cols: &[usize]) -> Vec<f64> {
-        let mut out = vec![0.0; rows.len() * cols.len()];
-        self.fill(rows, cols, &mut out);
         out
     }
 }

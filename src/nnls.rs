@@ -183,20 +183,15 @@ impl Factor {
         // Only the lower triangle of S is formed and read (the Cholesky below reads no more).
         let jc = kernel.coords(new);
         let mut s = Mat::<f64>::zeros(nb, nb);
-        if nb * nb < 1 << 16 {
-            for b in 0..nb {
-                for a in b..nb {
-                    s[(a, b)] = kernel.coeff_at(jc[a], jc[b]);
-                }
+        let fill_col = |(b, mut col): (usize, MatMut<'_, f64>)| {
+            for a in b..nb {
+                col[(a, 0)] = kernel.coeff_at(jc[a], jc[b]);
             }
+        };
+        if nb * nb < 1 << 16 {
+            (0..nb).for_each(|b| fill_col((b, s.as_mut().subcols_mut(b, 1))));
         } else {
-            s.par_col_chunks_mut(1)
-                .enumerate()
-                .for_each(|(b, mut col)| {
-                    for a in b..nb {
-                        col[(a, 0)] = kernel.coeff_at(jc[a], jc[b]);
-                    }
-                });
+            s.par_col_chunks_mut(1).enumerate().for_each(fill_col);
         }
         if k == 0 {
             // S = C_JJ: dropping points of this block again is a plain re-append (there is no
@@ -399,18 +394,14 @@ impl Factor {
             return;
         }
         let m = self.fwd_ok.min(k);
-        self.fwd.resize(k, 0.0);
-        for (y, &i) in self.fwd[m..].iter_mut().zip(&self.idx[m..]) {
+        let mut fwd = std::mem::take(&mut self.fwd);
+        fwd.resize(k, 0.0);
+        for (y, &i) in fwd[m..].iter_mut().zip(&self.idx[m..]) {
             *y = b[i];
         }
+        let l = self.lower(k);
         if m < k {
-            let (head, tail) = self.fwd.split_at_mut(m);
-            let l = MatRef::from_row_major_slice_with_stride(
-                &self.l[..(k - 1) * self.cap + k],
-                k,
-                k,
-                self.cap,
-            );
+            let (head, tail) = fwd.split_at_mut(m);
             let mut y_new = MatMut::from_column_major_slice_mut(tail, k - m, 1);
             if m > 0 {
                 matmul(
@@ -427,33 +418,15 @@ impl Factor {
                 y_new,
                 par_for((k - m) * (k - m) / 64),
             );
-            self.fwd_ok = k;
         }
-        z.extend_from_slice(&self.fwd);
+        z.extend_from_slice(&fwd);
         solve_upper_triangular_in_place(
-            self.lower(k).transpose(),
+            l.transpose(),
             MatMut::from_column_major_slice_mut(z.as_mut_slice(), k, 1),
             par_for(k * k / 64),
         );
-    }
-
-    /// Solve `C_PP x = rhs` in place.
-    pub fn solve(&self, rhs: &mut [f64]) {
-        let k = self.idx.len();
-        if k == 0 {
-            return;
-        }
-        let l = self.lower(k);
-        solve_lower_triangular_in_place(
-            l,
-            MatMut::from_column_major_slice_mut(&mut *rhs, k, 1),
-            par_for(k * k / 64),
-        );
-        solve_upper_triangular_in_place(
-            l.transpose(),
-            MatMut::from_column_major_slice_mut(rhs, k, 1),
-            par_for(k * k / 64),
-        );
+        self.fwd = fwd;
+        self.fwd_ok = k;
     }
 }
 
@@ -609,8 +582,9 @@ impl<'a> LawsonHanson<'a> {
         let mut skipped: Vec<usize> = Vec::new();
         let mut z: Vec<f64> = Vec::new();
         loop {
-            // u = C p (zero while p is: a cold start needs no product).
-            if self.factor.is_empty() && p.iter().all(|&v| v == 0.0) {
+            // u = C p. Only points of P carry pressure, so an empty P means p = 0 and u = 0:
+            // a cold start needs no product.
+            if self.factor.is_empty() {
                 u.fill(0.0);
             } else {
                 self.op.apply(&p, &mut u);
@@ -910,15 +884,17 @@ mod tests {
         f.remove_at(3);
         f.remove_at(0);
         f.remove_at(f.len() - 1);
-        let rhs0 = lcg(5, f.len());
-        let mut x = rhs0.clone();
-        f.solve(&mut x);
+        let b = lcg(5, 81);
+        let mut x = Vec::new();
+        f.new_rhs();
+        f.solve_rhs(&b, &mut x);
         // Residual against the block built directly.
         let c = ker.block(&f.idx);
         let k = f.len();
         for r in 0..k {
             let s: f64 = (0..k).map(|cc| c[r + k * cc] * x[cc]).sum();
-            assert!((s - rhs0[r]).abs() < 1e-12, "{s} vs {}", rhs0[r]);
+            let want = b[f.idx[r]];
+            assert!((s - want).abs() < 1e-12, "{s} vs {want}");
         }
     }
 
@@ -974,10 +950,12 @@ mod timing {
         let t = std::time::Instant::now();
         f.append(&ker, &set, 20000).unwrap();
         eprintln!("append 5000 from empty: {:?}", t.elapsed());
-        let mut rhs = vec![1.0; f.len()];
+        let b = vec![1.0; 129 * 129];
+        let mut z = Vec::new();
         let t = std::time::Instant::now();
         for _ in 0..10 {
-            f.solve(&mut rhs);
+            f.new_rhs();
+            f.solve_rhs(&b, &mut z);
         }
         eprintln!("solve k=5000: {:?} each", t.elapsed() / 10);
         let more: Vec<usize> = (1..129 * 129).step_by(3).take(300).collect();
