@@ -2,19 +2,52 @@
 //! mapped to a Python exception. No numerics live here.
 
 use numpy::{PyArray2, PyArrayMethods};
-use pyo3::exceptions::{PyKeyboardInterrupt, PyMemoryError, PyRuntimeError, PyValueError};
+use pyo3::exceptions::PyKeyboardInterrupt;
 use pyo3::prelude::*;
+use pyo3::types::PyDict;
 
 use crate::error::Error;
 use crate::influence;
 
+/// Maps a core error to the matching `leakpath.errors` exception, with its structured fields
+/// (`argument`; `estimate`, `limit`, `what`; `solver`, `iterations`, `residual`).
 pub(crate) fn to_py(err: Error) -> PyErr {
-    match err {
-        Error::InvalidArgument { .. } => PyValueError::new_err(err.to_string()),
-        Error::TooLarge { .. } => PyMemoryError::new_err(err.to_string()),
-        Error::NotConverged { .. } => PyRuntimeError::new_err(err.to_string()),
-        Error::Interrupted => PyKeyboardInterrupt::new_err("interrupted"),
+    if matches!(err, Error::Interrupted) {
+        return PyKeyboardInterrupt::new_err("interrupted");
     }
+    Python::attach(|py| typed_error(py, &err).unwrap_or_else(|e| e))
+}
+
+fn typed_error(py: Python<'_>, err: &Error) -> PyResult<PyErr> {
+    let kwargs = PyDict::new(py);
+    let class = match err {
+        Error::InvalidArgument { name, .. } => {
+            kwargs.set_item("argument", *name)?;
+            "InvalidArgumentError"
+        }
+        Error::TooLarge { bytes, limit, what } => {
+            kwargs.set_item("estimate", *bytes)?;
+            kwargs.set_item("limit", *limit)?;
+            kwargs.set_item("what", what.as_str())?;
+            "ProblemTooLargeError"
+        }
+        Error::NotConverged {
+            iterations,
+            residual,
+            what,
+        } => {
+            kwargs.set_item("solver", what.as_str())?;
+            kwargs.set_item("iterations", *iterations)?;
+            kwargs.set_item("residual", *residual)?;
+            "NotConvergedError"
+        }
+        Error::Interrupted => return Ok(PyKeyboardInterrupt::new_err("interrupted")),
+    };
+    let errors = py.import("leakpath.errors")?;
+    let value = errors
+        .getattr(class)?
+        .call((err.to_string(),), Some(&kwargs))?;
+    Ok(PyErr::from_value(value))
 }
 
 /// Grids with fewer cells than this are solved on one thread. Their FFTs and factor updates
