@@ -147,6 +147,56 @@ impl Operator {
         op
     }
 
+    /// The inverse of the half-space compliance, `ẑ_q = (E* |q| / 2) ĝ_q`, as a periodic
+    /// operator on a zero-padded `Py × Px` grid, `P` the smallest 2,3,5-smooth size `≥ n`
+    /// (an FFT of a size with a large prime factor, such as 129 = 3·43, costs several times
+    /// more), with the `q = 0` stiffness set to that of the longest wavelength,
+    /// `E* q_min / 2`, `q_min = 2π / max(Py, Px)·dx`. It is symmetric positive definite on the
+    /// padded grid, so its restriction to any set of points (the contact set) is too: the
+    /// Polonsky–Keer preconditioner for both boundaries.
+    pub fn inverse_compliance(ny: usize, nx: usize, dx: f64, e_star: f64) -> Self {
+        let (py, px) = (smooth_size(ny), smooth_size(nx));
+        let mut op = Self::plan(ny, nx, py, px, Boundary::Periodic);
+        let norm = 1.0 / (py * px) as f64;
+        let two_pi = 2.0 * std::f64::consts::PI;
+        let (ly, lx) = (py as f64 * dx, px as f64 * dx);
+        let q_min = two_pi / ly.max(lx);
+        let pxh = op.pxh;
+        let mut spec = vec![0.0; pxh * py];
+        spec.par_chunks_mut(py).enumerate().for_each(|(c, col)| {
+            let qx = two_pi * c as f64 / lx;
+            for (r, v) in col.iter_mut().enumerate() {
+                let kr = if r <= py / 2 {
+                    r as f64
+                } else {
+                    r as f64 - py as f64
+                };
+                let qy = two_pi * kr / ly;
+                let q = (qx * qx + qy * qy).sqrt().max(q_min);
+                *v = 0.5 * e_star * q * norm;
+            }
+        });
+        op.spec = spec;
+        op
+    }
+
+    /// Mean of the operator's diagonal, `(1/N) Σ_q ŝ_q` over the full spectrum (the value of
+    /// the operator's kernel at zero offset).
+    pub fn diagonal(&self) -> f64 {
+        // spec is already divided by py·px; the half spectrum counts each interior column twice.
+        let (py, pxh, px) = (self.py, self.pxh, self.px);
+        let mut s = 0.0;
+        for c in 0..pxh {
+            let w = if c == 0 || (px % 2 == 0 && c == pxh - 1) {
+                1.0
+            } else {
+                2.0
+            };
+            s += w * self.spec[c * py..(c + 1) * py].iter().sum::<f64>();
+        }
+        s
+    }
+
     fn plan(ny: usize, nx: usize, py: usize, px: usize, boundary: Boundary) -> Self {
         let mut rp = RealFftPlanner::<f64>::new();
         let mut cp = FftPlanner::<f64>::new();

@@ -78,6 +78,29 @@
 //! `u = C p` and the gap and tests again, so the returned fields and certificate always come
 //! from a fresh product (round-off drift of the increments cannot fake convergence).
 //!
+//! # Preconditioning
+//!
+//! With [`Options::precondition`] (the default) a conjugate step on a stable contact set uses
+//! the preconditioned residual `z = M g` on `I_c`, `M` the inverse half-space compliance
+//! `E*|q|/2` applied by FFT on the `ny × nx` grid zero-padded to a 2,3,5-smooth size
+//! ([`Operator::inverse_compliance`]; `q = 0` gets the stiffness of the longest wavelength):
+//!
+//! ```text
+//! z = M (g on I_c) on I_c,   G = Σ_{I_c} g z,   t = z + δ (G / G_old) t
+//! ```
+//!
+//! (preconditioned CG on `C_PP`, in the spirit of Vollebregt's FFT-preconditioned BCCG). `M`
+//! is SPD on the padded grid, so its restriction to `I_c` is SPD and the step is a descent
+//! step; the exact line search is unchanged. A preconditioned `τ` is dimensionless, so points
+//! entering through `I_ol` in such a step get `p = −τ g / C_00` (the pressure that closes the
+//! gap of that point alone) instead of `−τ g`. A steepest-descent step, or a conjugate step
+//! after one, stays plain. Preconditioning is switched off for the rest of a solve once more
+//! than half the points are in contact (where it stops paying) or when the certificate grows
+//! past `10³×` its best value. Each preconditioned iteration costs one more FFT pair on the
+//! unpadded grid (about a quarter of a free-boundary product); measured at 513², tol 1e-12,
+//! it halves the iterations at Δ = 0.6 h_s and Δ = h_s (free) and at 0.6 of full contact
+//! (periodic); the answer is the same minimiser (identical contact sets in every test).
+//!
 //! # Convergence
 //!
 //! The KKT certificate, relative to the height range `h_s = max h − min h`:
@@ -127,6 +150,16 @@ pub fn sparse_limit(boundary: Boundary) -> usize {
     }
 }
 
+/// Preconditioned steps are taken while at most this fraction of the points is in contact.
+/// Measured on RMD (D = 2.1, 2.5) and spectral (H = 0.5, 0.9) surfaces at 257², tol 1e-12:
+/// up to 50 % contact the preconditioner halves the iterations of small approaches and
+/// never costs more; near full periodic contact it costs up to 2× more.
+const PRECONDITION_MAX_FRACTION: f64 = 0.5;
+
+/// A preconditioned solve whose certificate grows past this multiple of its best value so
+/// far continues with plain Polonsky–Keer steps.
+const SAFEGUARD: f64 = 1e3;
+
 /// `should_stop` is polled at least every this many iterations…
 const STOP_EVERY: usize = 10;
 /// …and at least this often on grids where ten iterations take long.
@@ -169,6 +202,9 @@ pub struct Options<'a> {
     pub memory_limit: Option<u64>,
     /// Polled every ~10 iterations (and at least every 0.25 s); `true` → [`Error::Interrupted`].
     pub should_stop: Option<&'a (dyn Fn() -> bool + Sync)>,
+    /// Precondition the conjugate directions with the periodic inverse compliance
+    /// `E*|q|/2` restricted to the contact set (see the module documentation).
+    pub precondition: bool,
 }
 
 impl Default for Options<'_> {
@@ -179,6 +215,7 @@ impl Default for Options<'_> {
             initial_pressure: None,
             memory_limit: None,
             should_stop: None,
+            precondition: true,
         }
     }
 }
@@ -201,6 +238,9 @@ pub struct Solution {
     /// FFT operator applications in total: one per iteration, plus fresh products `C p` (start,
     /// large set changes, convergence checks) and one for the influence table.
     pub applies: usize,
+    /// Preconditioner applications (FFT pairs on the unpadded `ny × nx` grid), one per
+    /// preconditioned iteration.
+    pub preconditioner_applies: usize,
     /// KKT certificate relative to `h_s` (see the module documentation).
     pub kkt: f64,
     /// Number of points with `p > 0`.
@@ -557,6 +597,11 @@ struct Work<'a> {
     periodic: bool,
     parts: Vec<Acc>,
     applies: usize,
+    /// Preconditioner (periodic inverse compliance on the `ny × nx` grid), its diagonal, the
+    /// preconditioned residual `z = M g` on `I_c`, and the number of its applications.
+    pre: Option<Operator>,
+    z: Vec<f64>,
+    pre_applies: usize,
 }
 
 fn combine(parts: &[Acc]) -> Acc {
@@ -673,6 +718,75 @@ impl Work<'_> {
         }
     }
 
+    /// Preconditioned residual `z = M (g on I_c)` restricted to `I_c`; returns `Σ_{I_c} g z`
+    /// (in `gt`). `r` is scratch here (between an update and the next product `C t`).
+    fn precondition(&mut self) -> Acc {
+        let Work { p, g, z, r, .. } = self;
+        z.par_chunks_mut(CHUNK)
+            .zip(p.par_chunks(CHUNK))
+            .zip(g.par_chunks(CHUNK))
+            .for_each(|((zc, pc), gc)| {
+                for i in 0..zc.len() {
+                    zc[i] = if pc[i] > 0.0 { gc[i] } else { 0.0 };
+                }
+            });
+        self.pre
+            .as_ref()
+            .expect("precondition() needs a preconditioner")
+            .apply(z, r);
+        self.pre_applies += 1;
+        let (p, g, r) = (&self.p, &self.g, &self.r);
+        self.parts
+            .par_iter_mut()
+            .zip(self.z.par_chunks_mut(CHUNK))
+            .enumerate()
+            .for_each(|(c, (acc, zc))| {
+                let lo = c * CHUNK;
+                let mut a = Acc::ZERO;
+                for i in 0..zc.len() {
+                    let zi = if p[lo + i] > 0.0 { r[lo + i] } else { 0.0 };
+                    zc[i] = zi;
+                    a.gt += g[lo + i] * zi;
+                }
+                *acc = a;
+            });
+        combine(&self.parts)
+    }
+
+    /// Step 2 with the preconditioned residual: `t = z + β t` on `I_c`, 0 elsewhere. Returns
+    /// `Σ g t`, `Σ_W t`, `|W|`.
+    fn direction_preconditioned(&mut self, beta: f64) -> Acc {
+        let Work {
+            p, g, z, t, parts, ..
+        } = self;
+        let (p, g, z) = (&*p, &*g, &*z);
+        parts
+            .par_iter_mut()
+            .zip(t.par_chunks_mut(CHUNK))
+            .enumerate()
+            .for_each(|(c, (acc, tc))| {
+                let lo = c * CHUNK;
+                let n = tc.len();
+                let (pc, gc, zc) = (&p[lo..lo + n], &g[lo..lo + n], &z[lo..lo + n]);
+                let mut a = Acc::ZERO;
+                for i in 0..n {
+                    let ti = if pc[i] > 0.0 {
+                        zc[i] + beta * tc[i]
+                    } else {
+                        0.0
+                    };
+                    tc[i] = ti;
+                    if pc[i] > 0.0 {
+                        a.n_w += 1;
+                        a.gt += gc[i] * ti;
+                        a.st += ti;
+                    }
+                }
+                *acc = a;
+            });
+        combine(parts)
+    }
+
     /// Step 2: `t = g + β t` on the working set `W`, 0 elsewhere. `W = I_c`, or
     /// `I_c ∪ {g < 0}` for a steepest-descent step. Returns `Σ g t`, `Σ_W t`, `|W|`.
     fn direction(&mut self, beta: f64, steepest: bool) -> Acc {
@@ -755,6 +869,7 @@ impl Work<'_> {
     /// through `I_ol` with the gap `g` of step 1.
     #[inline(always)]
     fn step_point(lin: f64, g: f64, tau: f64, a: &mut Acc) -> f64 {
+        // `tau` is `τ` of a plain step, `τ / C_00` of a preconditioned one (see `run`).
         let mut pn = lin;
         if pn < 0.0 {
             pn = 0.0;
@@ -774,7 +889,7 @@ impl Work<'_> {
     ///   gap.
     /// * Load: `u ← u − τ r`; returns `Σ p`, `Σ_{I_c} (max h − h)`, `Σ_{I_c} u` of the unscaled
     ///   new state (the gap is written by the following [`Work::gap_pass`]).
-    fn update(&mut self, tau: f64, mode: Mode) -> Acc {
+    fn update(&mut self, tau: f64, tau_ol: f64, mode: Mode) -> Acc {
         let (h, hmax) = (self.h, self.hmax);
         let Work {
             p,
@@ -801,7 +916,7 @@ impl Work<'_> {
                     let mut a = Acc::ZERO;
                     for i in 0..len {
                         let lin = pc[i] - tau * tc[i];
-                        let pn = Self::step_point(lin, gc[i], tau, &mut a);
+                        let pn = Self::step_point(lin, gc[i], tau_ol, &mut a);
                         if pn != lin {
                             record(sl, &mut a, lo + i, pn - lin);
                         }
@@ -826,7 +941,7 @@ impl Work<'_> {
                     let mut a = Acc::ZERO;
                     for i in 0..len {
                         let lin = pc[i] - tau * tc[i];
-                        let pn = Self::step_point(lin, gc[i], tau, &mut a);
+                        let pn = Self::step_point(lin, gc[i], tau_ol, &mut a);
                         if pn != lin {
                             record(sl, &mut a, lo + i, pn - lin);
                         }
@@ -1102,7 +1217,15 @@ fn run(op: &Operator, problem: &Problem, control: Control, opts: &Options) -> Re
         periodic,
         parts: vec![Acc::ZERO; n_chunks],
         applies: 0,
+        pre: None,
+        z: Vec::new(),
+        pre_applies: 0,
     };
+    if opts.precondition {
+        let pre = Operator::inverse_compliance(ny, nx, problem.dx, problem.e_star);
+        w.pre = Some(pre);
+        w.z = vec![0.0; n];
+    }
 
     // Initial pressure: the warm start, or p = 0 (displacement) / uniform p̄ (load, the paper's).
     if let Some(p0) = opts.initial_pressure {
@@ -1129,9 +1252,23 @@ fn run(op: &Operator, problem: &Problem, control: Control, opts: &Options) -> Re
     let mut it = 0usize;
     let mut cg = false; // the paper's δ
     let mut g_old = 1.0;
+    // The last step was a preconditioned one (its `G = Σ g z` is what β continues from).
+    let mut last_pre = false;
     let mut last_poll = Instant::now();
+    let mut best_cert = f64::INFINITY;
     loop {
         let cert = state.certificate() / scale;
+        if w.pre.is_some()
+            // Past half contact the preconditioned steps stop paying (measured: the same or
+            // more iterations), and a diverging one is cut short.
+            && (cert > SAFEGUARD * best_cert
+                || state.n_c as f64 > PRECONDITION_MAX_FRACTION * n as f64)
+        {
+            // The preconditioned iteration is not contracting: finish with plain steps.
+            w.pre = None;
+            cg = false;
+        }
+        best_cert = best_cert.min(cert);
         if cert <= opts.tol {
             if fresh {
                 break;
@@ -1161,15 +1298,33 @@ fn run(op: &Operator, problem: &Problem, control: Control, opts: &Options) -> Re
         // Step 2: the conjugate direction, or a steepest-descent step on I_c ∪ {g < 0} when
         // there is no contact set or the direction carries no descent.
         let mut steepest = state.n_c == 0;
-        let beta = if cg && !steepest && g_old > 0.0 {
-            state.gg / g_old
-        } else {
-            0.0
-        };
-        let mut dir = w.direction(beta, steepest);
-        if !positive(dir.gt) && !steepest {
-            steepest = true;
-            dir = w.direction(0.0, true);
+        let mut preconditioned = false;
+        let mut dir = Acc::ZERO;
+        if w.pre.is_some() && !steepest {
+            // G = Σ_{I_c} g z; β continues only a preconditioned sequence.
+            let gz = w.precondition().gt;
+            let beta = if cg && last_pre && g_old > 0.0 {
+                gz / g_old
+            } else {
+                0.0
+            };
+            dir = w.direction_preconditioned(beta);
+            if positive(dir.gt) && positive(gz) {
+                preconditioned = true;
+                g_old = gz;
+            }
+        }
+        if !preconditioned {
+            let beta = if cg && !last_pre && !steepest && g_old > 0.0 {
+                state.gg / g_old
+            } else {
+                0.0
+            };
+            dir = w.direction(beta, steepest);
+            if !positive(dir.gt) && !steepest {
+                steepest = true;
+                dir = w.direction(0.0, true);
+            }
         }
         if !positive(dir.gt) {
             // No descent anywhere: g vanishes on I_c and nothing overlaps, up to round-off
@@ -1180,7 +1335,10 @@ fn run(op: &Operator, problem: &Problem, control: Control, opts: &Options) -> Re
                 what: "Polonsky–Keer".into(),
             });
         }
-        g_old = if steepest { dir.gt } else { state.gg };
+        if !preconditioned {
+            g_old = if steepest { dir.gt } else { state.gg };
+        }
+        last_pre = preconditioned;
 
         // Steps 3–4.
         w.op.apply(&w.t, &mut w.r);
@@ -1203,7 +1361,12 @@ fn run(op: &Operator, problem: &Problem, control: Control, opts: &Options) -> Re
         }
 
         // Steps 5–6 (+ 1 on the incremental u).
-        let up = w.update(tau, mode);
+        // Points entering through I_ol get `p = −τ g` (the paper's rule) after a plain step.
+        // A preconditioned step's `τ` is dimensionless (≈ 1 when M ≈ C⁻¹); its entries get
+        // `−τ g / C_00`, the pressure that closes the gap at that point alone, the softer of
+        // the two local stiffness estimates (the diagonal of M overshoots and oscillates).
+        let tau_ol = if preconditioned { tau / c00 } else { tau };
+        let up = w.update(tau, tau_ol, mode);
         it += 1;
         // The paper's rule. After a steepest step on W, δ = 1 continues CG from that step
         // (G_old = Σ_W g²), which is exact when the set did not change.
@@ -1265,6 +1428,7 @@ fn run(op: &Operator, problem: &Problem, control: Control, opts: &Options) -> Re
     let kkt = state.certificate() / scale;
     let sum_p = state.sum_p;
     let applies = w.applies;
+    let pre_applies = w.pre_applies;
     let pressure = std::mem::take(&mut w.p);
     let gap = std::mem::take(&mut w.g);
     Ok(Solution {
@@ -1276,6 +1440,7 @@ fn run(op: &Operator, problem: &Problem, control: Control, opts: &Options) -> Re
         approach: delta,
         iterations: it,
         applies,
+        preconditioner_applies: pre_applies,
         kkt,
         contact_points: state.n_c,
         load: sum_p * problem.dx * problem.dx,

@@ -621,7 +621,7 @@ mod pk_py {
     #[pyfunction]
     #[pyo3(signature = (
         heights, dx, e_star, boundary="free", approach=None, mean_pressure=None, tol=None,
-        max_iter=None, initial_pressure=None, memory_limit=None
+        max_iter=None, initial_pressure=None, memory_limit=None, precondition=true
     ))]
     #[allow(clippy::too_many_arguments)]
     pub(super) fn solve_polonsky_keer<'py>(
@@ -636,6 +636,7 @@ mod pk_py {
         max_iter: Option<usize>,
         initial_pressure: Option<PyReadonlyArray2<'py, f64>>,
         memory_limit: Option<u64>,
+        precondition: bool,
     ) -> PyResult<Bound<'py, PyDict>> {
         let [ny, nx] = [heights.shape()[0], heights.shape()[1]];
         let control = match (approach, mean_pressure) {
@@ -697,6 +698,7 @@ mod pk_py {
                 initial_pressure: p0,
                 memory_limit: Some(memory_limit),
                 should_stop: Some(&stop),
+                precondition,
             };
             catch_unwind(AssertUnwindSafe(|| {
                 super::on_solver_pool(ny * nx, || pk::solve(&problem, control, &opts))
@@ -729,6 +731,7 @@ mod pk_py {
         d.set_item("approach", sol.approach)?;
         d.set_item("iterations", sol.iterations)?;
         d.set_item("applies", sol.applies)?;
+        d.set_item("preconditioner_applies", sol.preconditioner_applies)?;
         d.set_item("kkt", sol.kkt)?;
         d.set_item("load", sol.load)?;
         d.set_item("mean_pressure", sol.mean_pressure)?;
