@@ -30,6 +30,7 @@ import math
 import os
 import secrets
 import stat
+import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -410,7 +411,9 @@ def _read_text(path: Path) -> _Raw:
                 sample = stripped
                 break
     delimiter = "," if "," in sample else (";" if ";" in sample else None)
-    arr = np.loadtxt(path, delimiter=delimiter, comments="#", ndmin=2, dtype=np.float64)
+    with warnings.catch_warnings():  # an empty file is reported below, not warned about
+        warnings.simplefilter("ignore", UserWarning)
+        arr = np.loadtxt(path, delimiter=delimiter, comments="#", ndmin=2, dtype=np.float64)
     if arr.size == 0:
         raise ValueError("no numbers in the file")
     cloud = _grid_point_cloud(arr, path)
@@ -447,11 +450,15 @@ def _grid_point_cloud(arr: np.ndarray, path: Path) -> _Raw | None:
     if not (np.isfinite(x).all() and np.isfinite(y).all()):
         return None
     ux, uy = np.unique(x), np.unique(y)
+    sorted_xy = _monotone(x) or _monotone(y)
     repeated = ux.size < rows or uy.size < rows
-    cloud_like = repeated and (_monotone(x) or _monotone(y))
-    if not cloud_like:
+    # A sorted column is a coordinate; a sorted column of 8 or more rough heights is not.
+    if not (sorted_xy and (repeated or rows >= 8)):
         return None
-    where = f"{str(path)!r} looks like an x,y,z point cloud (3 columns, x or y sorted)"
+    where = (
+        f"{str(path)!r} looks like an x,y,z point cloud (3 columns, x or y sorted; a "
+        "3-column height matrix can be read with numpy and passed to Surface)"
+    )
     if ux.size < 2 or uy.size < 2:
         raise ValueError(f"{where} but all points share one x or one y: a line, not a surface")
     sx, sy = _uniform_steps(ux), _uniform_steps(uy)
@@ -492,20 +499,25 @@ def _st_format_name(reader: Any) -> str:
     return getattr(reader, "__name__", "reader")
 
 
+class _NoReader(ValueError):
+    """No reader matched or every matching reader failed; the message lists what was tried."""
+
+
 def _st_open(st: Any, path: Path, tried: list[str]) -> Any:
     """Open ``path`` with the SurfaceTopography reader its signature or extension names.
 
     SurfaceTopography's own detection tries every reader, and some formats have no
     signature (an HGT elevation map is any file of 2·n² bytes), so random data can pass as a
     surface. Here a reader is tried only when the file's first bytes match its signature,
-    or when they do not rule it out and the file has one of its extensions.
+    or when they do not rule it out and the file has one of its extensions. ``tried``
+    collects the formats tried and why they failed.
     """
     readers = getattr(getattr(st, "IO", None), "readers", None)
     if not readers:  # a SurfaceTopography without a reader registry: its own detection
-        tried.append("SurfaceTopography (automatic detection)")
         return st.open_topography(str(path))
     ext = path.suffix.lower().lstrip(".")
     magic = _sniff(path)[:512]
+    ruled_out: list[str] = []  # formats of this extension whose signature is absent
     for reader in readers:
         verdict = "MAYBE"
         can_read = getattr(reader, "can_read", None)
@@ -514,12 +526,14 @@ def _st_open(st: Any, path: Path, tried: list[str]) -> Any:
                 verdict = str(getattr(can_read(magic), "name", "MAYBE"))
             except Exception:  # a failing check decides nothing
                 verdict = "MAYBE"
-        if verdict == "NO":
-            continue
         try:
             extensions = [str(e).lower() for e in (reader.file_extensions() or [])]
-        except Exception:  # reader without registered extensions
+        except Exception:  # a reader without registered extensions
             extensions = []
+        if verdict == "NO":
+            if ext in extensions:
+                ruled_out.append(_st_format_name(reader))
+            continue
         if verdict != "YES" and ext not in extensions:
             continue
         name = _st_format_name(reader)
@@ -527,16 +541,23 @@ def _st_open(st: Any, path: Path, tried: list[str]) -> Any:
             return reader(str(path))
         except Exception as exc:  # try the next matching reader
             tried.append(f"{name} ({_one_line(exc)[:120]})")
-    if not tried:
-        tried.append(
-            f"no SurfaceTopography reader: neither the file's signature nor its extension "
-            f"{path.suffix or '(none)'!r} matches a known format"
+    if tried:
+        raise _NoReader("tried " + "; ".join(tried))
+    if ruled_out:
+        raise _NoReader(
+            f"its extension {path.suffix!r} names {' or '.join(ruled_out)}, but its first bytes "
+            "do not carry that format's signature (a damaged file, or another format)"
         )
-    raise ValueError("; ".join(tried))
+    raise _NoReader(
+        f"it matches no known format: neither its first bytes nor its extension "
+        f"{path.suffix or '(none)'!r} belong to a format leakpath or SurfaceTopography reads "
+        "(leakpath itself reads .npz, .npy, .txt, .csv, .asc and .dat)"
+    )
 
 
 def _read_surface_topography(st: Any, path: Path, dx: float | None, tried: list[str]) -> _Raw:
     reader = _st_open(st, path, tried)
+    name = _st_format_name(type(reader))
     try:
         channel = getattr(reader, "default_channel", None) or reader.channels[0]
         if getattr(channel, "dim", 2) != 2:
@@ -550,18 +571,31 @@ def _read_surface_topography(st: Any, path: Path, dx: float | None, tried: list[
                     "pass dx=..."
                 )
             kwargs["physical_sizes"] = tuple(float(n) * dx for n in channel.nb_grid_pts)
-        topo = channel.topography(**kwargs)
+        try:
+            topo = channel.topography(**kwargs)
+            raw_heights = topo.heights()
+            if np.ma.isMaskedArray(raw_heights):  # undefined points: NaN; load() decides
+                raw_heights = np.ma.filled(np.ma.asarray(raw_heights, dtype=np.float64), np.nan)
+            # A copy, and no reference kept to the topography: some readers map the file,
+            # which is closed below.
+            raw_heights = np.array(raw_heights)
+            nx, ny = (int(n) for n in topo.nb_grid_pts)
+            sx, sy = (float(s) for s in topo.physical_sizes)
+            info = getattr(topo, "info", None)
+            del topo
+        except LeakpathError:
+            raise
+        except Exception as exc:
+            failed = [*tried, f"{name} ({_one_line(exc)[:160]})"]
+            raise _NoReader("tried " + "; ".join(failed)) from exc
     finally:
         close = getattr(reader, "close", None)
         if callable(close):
-            close()
-    raw_heights = topo.heights()
-    if np.ma.isMaskedArray(raw_heights):  # undefined points: NaN, then load() decides
-        raw_heights = np.ma.filled(np.ma.asarray(raw_heights, dtype=np.float64), np.nan)
+            with warnings.catch_warnings():  # a memory-mapped reader warns about its own views
+                warnings.simplefilter("ignore", RuntimeWarning)
+                close()
     # SurfaceTopography indexes heights[ix, iy] (axis 0 = x); leakpath uses axis 1 = x.
-    heights = np.asarray(raw_heights).T
-    nx, ny = (int(n) for n in topo.nb_grid_pts)
-    sx, sy = (float(s) for s in topo.physical_sizes)
+    heights = raw_heights.T
     dx_x, dx_y = sx / nx, sy / ny
     if not math.isclose(dx_x, dx_y, rel_tol=1e-9):
         raise InvalidArgumentError(
@@ -570,7 +604,6 @@ def _read_surface_topography(st: Any, path: Path, dx: float | None, tried: list[
             argument="path",
         )
     meta: dict[str, Any] = {"reader": "SurfaceTopography"}
-    info = getattr(topo, "info", None)
     if isinstance(info, Mapping) and "unit" in info:
         meta["unit"] = str(info["unit"])
     return _Raw(heights, dx_x if from_file else None, meta)
@@ -617,15 +650,7 @@ def _read_any(path: Path, size: int, dx: float | None) -> _Raw:
         st = _st_module()
         if st is None:
             raise _needs_io(path)
-    try:
-        return _read_surface_topography(st, path, dx, tried)
-    except InvalidArgumentError:
-        raise
-    except Exception as exc:
-        message = _one_line(exc)
-        if tried and message != "; ".join(tried):
-            tried.append(message)
-        raise ValueError("tried " + "; ".join(tried) if tried else message) from exc
+    return _read_surface_topography(st, path, dx, tried)
 
 
 def _fill_undefined(h: FloatArray, method: str) -> None:
