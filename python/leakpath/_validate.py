@@ -33,6 +33,7 @@ __all__ = [
     "boundary",
     "choice",
     "connectivity",
+    "contact_scales",
     "describe",
     "flag",
     "format_bytes",
@@ -299,6 +300,46 @@ _KIND_NAMES = {
     "m": "time spans",
     "V": "records",
 }
+
+
+# ---------------------------------------------------------------------------- contact
+#: Largest power of ten (either sign) any scale of a contact problem may reach (below).
+SCALE_EXPONENT = 250
+
+
+def contact_scales(e_star: float, dx: float, height_range: float, name: str = "E") -> None:
+    """Refuse unit choices whose solver arithmetic would leave the floating-point range.
+
+    With contact modulus ``E*``, spacing ``dx`` and height range ``h_s``, the solvers work
+    with the compliance ``C ≈ dx/E*`` [length/pressure], pressures ``P ≈ E*·h_s/dx``, loads
+    ``P·dx²``, volumes ``h_s·dx²`` and the energies ``h_s²/C`` and ``P²·C`` of their line
+    searches. Each must lie within ``10^±``:data:`SCALE_EXPONENT` (a margin of about 50
+    decades below the limits of double precision for sums over many points); a scan of
+    unit choices found every failure of the solvers outside that box and none inside.
+    """
+    log_c = math.log10(dx) - math.log10(e_star)
+    terms = [("compliance dx/E*", log_c)]
+    if height_range > 0:
+        log_h = math.log10(height_range)
+        log_p = log_h - log_c
+        log_dx2 = 2.0 * math.log10(dx)
+        terms += [
+            ("pressure scale E*·h_s/dx", log_p),
+            ("squared pressure scale", 2.0 * log_p),
+            ("load scale E*·h_s·dx", log_p + log_dx2),
+            ("volume scale h_s·dx²", log_h + log_dx2),
+            ("energy scale h_s²·dx/E*", 2.0 * log_h + log_c),
+            ("energy scale h_s·E*·h_s/dx", 2.0 * log_h - log_c),
+        ]
+    for what, exponent in terms:
+        if abs(exponent) > SCALE_EXPONENT:
+            raise InvalidArgumentError(
+                f"{name}: with E* = {e_star:.3g}, dx = {dx:.3g} and h_s = {height_range:.3g} "
+                f"the {what} is about 1e{exponent:+.0f}, beyond 1e±{SCALE_EXPONENT} where the "
+                "solvers keep their precision; express E (pressures) or the lengths in units "
+                "closer to the problem's scale",
+                argument=name,
+            )
 
 
 # ---------------------------------------------------------------------------- memory
