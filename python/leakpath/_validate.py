@@ -29,6 +29,7 @@ from .errors import InvalidArgumentError, ProblemTooLargeError
 __all__ = [
     "AXES",
     "INT_MAX",
+    "MAX_ABS_HEIGHT",
     "axis",
     "boundary",
     "choice",
@@ -57,6 +58,9 @@ INT_MAX = 2**62
 AXES: tuple[int | str, ...] = (0, 1, "either", "both")
 
 _FLOAT_MIN = sys.float_info.min  # smallest normal double, ≈ 2.2e-308
+
+#: Largest |height| leakpath accepts: squares (moments, energies) stay finite.
+MAX_ABS_HEIGHT = 1e150
 
 
 def describe(value: Any, limit: int = 60) -> str:
@@ -254,8 +258,11 @@ def boundary(value: Any, name: str = "boundary") -> str:
 
 
 # ---------------------------------------------------------------------------- arrays
-def real_array(name: str, value: Any, *, ndim: int = 2, finite: bool = True) -> np.ndarray:
-    """A new C-contiguous float64 array of real numbers (a copy, never a view of ``value``).
+def real_array(
+    name: str, value: Any, *, ndim: int = 2, finite: bool = True, copy: bool = True
+) -> np.ndarray:
+    """A float64 array of real numbers: a new C-contiguous copy, never a view of ``value``
+    (with ``copy=False``: ``value`` itself, in any memory layout, when it is float64).
 
     Refuses complex values (their imaginary part would be dropped), strings, bools and
     objects, arrays of the wrong dimension, and — with ``finite`` — NaN or infinities.
@@ -281,7 +288,10 @@ def real_array(name: str, value: Any, *, ndim: int = 2, finite: bool = True) -> 
         raise InvalidArgumentError(
             f"{name}: must be a {ndim}-D array, got {arr.ndim} dimension(s) (shape {arr.shape})"
         )
-    out = np.array(arr, dtype=np.float64, order="C", copy=True)
+    if copy:
+        out = np.array(arr, dtype=np.float64, order="C", copy=True)
+    else:
+        out = np.asarray(arr, dtype=np.float64)
     if finite and out.size and not np.isfinite(out).all():
         bad = int(out.size - np.count_nonzero(np.isfinite(out)))
         raise InvalidArgumentError(

@@ -84,7 +84,7 @@ class _Owned:
 
 
 #: Largest |height| a surface may hold: squares (moments, energies) stay finite.
-MAX_ABS_HEIGHT = 1e150
+MAX_ABS_HEIGHT = _validate.MAX_ABS_HEIGHT
 
 
 def _json_default(obj: Any) -> Any:
