@@ -805,7 +805,7 @@ def _rmd_check_m(m: Any) -> int:
     largest = max((k for k in range(1, 40) if _rmd_bytes(k) <= limit), default=0)
     if m_int > largest:
         # 2^m itself is not computed for absurd m (2^(2^62) would never finish).
-        estimate = _rmd_bytes(m_int) if m_int < 64 else 2**130
+        estimate = _rmd_bytes(m_int) if m_int < 64 else 24 * 2**128  # a lower bound
         what = (
             f"an RMD surface with m = {m_int} ((2^{m_int} + 1)² points)"
             if m_int < 64
