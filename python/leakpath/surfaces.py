@@ -440,7 +440,8 @@ def _grid_point_cloud(arr: np.ndarray, path: Path) -> _Raw | None:
     """Three columns x, y, z whose (x, y) lie on a uniform square grid → heights[iy, ix].
 
     Returns ``None`` for an ordinary ``n × 3`` height map. A table that looks like a point
-    cloud (x or y sorted and repeated) but is not on a uniform square grid is refused.
+    cloud (x and y forming a complete grid in any order, or x or y sorted) but is not on a
+    uniform square grid is refused.
     Grid points missing from the table become undefined points (see ``fill``).
     """
     rows = arr.shape[0]
@@ -452,12 +453,15 @@ def _grid_point_cloud(arr: np.ndarray, path: Path) -> _Raw | None:
     ux, uy = np.unique(x), np.unique(y)
     sorted_xy = _monotone(x) or _monotone(y)
     repeated = ux.size < rows or uy.size < rows
-    # A sorted column is a coordinate; a sorted column of 8 or more rough heights is not.
-    if not (sorted_xy and (repeated or rows >= 8)):
+    # Two columns whose values pair up into every point of a grid, in any order, are
+    # coordinates; so is a sorted column, unless it is a short one without repeats (a sorted
+    # column of 8 or more rough heights does not happen by chance).
+    complete_grid = repeated and ux.size >= 2 and uy.size >= 2 and ux.size * uy.size == rows
+    if not (complete_grid or (sorted_xy and (repeated or rows >= 8))):
         return None
     where = (
-        f"{str(path)!r} looks like an x,y,z point cloud (3 columns, x or y sorted; a "
-        "3-column height matrix can be read with numpy and passed to Surface)"
+        f"{str(path)!r} looks like an x,y,z point cloud (3 columns, x and y on a grid or "
+        "sorted; a 3-column height matrix can be read with numpy and passed to Surface)"
     )
     if ux.size < 2 or uy.size < 2:
         raise ValueError(f"{where} but all points share one x or one y: a line, not a surface")
@@ -695,10 +699,12 @@ def load(path: PathLike, *, dx: float | None = None, fill: str | None = None) ->
     ``.npy``                             a 2-D array; ``dx`` required
     ``.txt`` ``.csv`` ``.asc``           a plain matrix, one grid row per line, comma-,
                                          semicolon- or whitespace-separated, ``#`` comments;
-                                         ``dx`` required. Three columns ``x, y, z`` with
-                                         x or y sorted are read as a point cloud: on a
-                                         uniform square grid they become ``heights[iy, ix]``
-                                         with ``dx`` the grid step; otherwise refused.
+                                         ``dx`` required. Three columns ``x, y, z`` whose
+                                         x, y form a complete grid (any row order) or are
+                                         sorted are read as a point cloud: on a uniform
+                                         square grid they become ``heights[iy, ix]`` with
+                                         ``dx`` the grid step (missing points undefined);
+                                         otherwise refused.
     ``.dat``                             a plain-text matrix as above; if that fails, a
                                          SurfaceTopography format (Zygo MetroPro binary …)
     anything else                        SurfaceTopography's readers (``pip install
