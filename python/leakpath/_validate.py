@@ -178,8 +178,12 @@ def integer(
     if not _is_int(value):
         raise InvalidArgumentError(f"{name}: must be {what}, got {describe(value)}{tail}")
     out = int(value)
-    if not low <= out <= high:
+    if out < low:
         raise InvalidArgumentError(f"{name}: must be {what}, got {describe(value)}{tail}")
+    if out > high:
+        raise InvalidArgumentError(
+            f"{name}: {describe(value)} is too large, at most {high} is allowed{tail}"
+        )
     return out
 
 

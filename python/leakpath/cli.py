@@ -90,6 +90,7 @@ def surface_statistics(surface: Surface) -> dict[str, Any]:
         try:
             mom = nayak_moments(surface)
         except InvalidArgumentError:  # slopes or curvatures beyond the float range for dx
+            stats["m0"] = surface.rms_height**2
             return stats
         stats.update(m0=mom.m0, m2=mom.m2, m4=mom.m4, alpha=_finite_or_none(mom.alpha))
     return stats

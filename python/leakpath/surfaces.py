@@ -750,9 +750,9 @@ def load(path: PathLike, *, dx: float | None = None, fill: str | None = None) ->
     ImportError
         A non-native format without the optional SurfaceTopography package.
     """
-    p, info = _check_path(path)
     dx_arg = None if dx is None else _validate.spacing("dx", dx)
     method = None if fill is None else _validate.choice("fill", fill, FILL_METHODS)
+    p, info = _check_path(path)
     try:
         raw = _read_any(p, info.st_size, dx_arg)
     except (ImportError, FileNotFoundError, LeakpathError):
@@ -806,7 +806,9 @@ def _rmd_bytes(m: int) -> int:
 
 
 def _rmd_check_m(m: Any) -> int:
-    m_int = _validate.integer("m", m, low=1, what="an integer ≥ 1 (grid (2^m + 1)²)")
+    m_int = _validate.integer(
+        "m", m, low=1, high=2**1024, what="an integer ≥ 1 (grid (2^m + 1)²)"
+    )
     limit = generator_memory_limit()
     largest = max((k for k in range(1, 40) if _rmd_bytes(k) <= limit), default=0)
     if m_int > largest:

@@ -518,7 +518,7 @@ _DEFINITIONS = {
 
 # ---------------------------------------------------------------------------- validation
 def _check_levels(levels: Any, shape: tuple[int, int], keep_fields: bool) -> int:
-    n = _validate.integer("levels", levels, low=1, what="an integer ≥ 1")
+    n = _validate.integer("levels", levels, low=1, high=2**1024, what="an integer ≥ 1")
     # Each level keeps its row (~16 KiB with its approach), its packed contact mask and
     # class map (≤ 2 bytes per point compressed) and, with keep_fields, pressure, gap and
     # labels twice over (20 bytes per point, stacked at the end): refuse before solving.
