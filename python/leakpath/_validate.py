@@ -280,8 +280,8 @@ def real_array(
     kind = arr.dtype.kind
     if kind == "c":
         raise InvalidArgumentError(
-            f"{name}: complex values are not heights; pass the real part (.real) or the "
-            "modulus (abs) explicitly"
+            f"{name}: complex values are not accepted (the imaginary part would be dropped); "
+            "pass the real part (.real) or the modulus (abs) explicitly"
         )
     if kind not in "fiu":
         raise InvalidArgumentError(

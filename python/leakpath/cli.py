@@ -33,7 +33,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
-from . import __version__
+from . import __version__, _validate
 from .errors import InvalidArgumentError, LeakpathError
 from .moments import nayak_moments
 from .surfaces import FILL_METHODS, Surface, load, rmd, spectral
@@ -545,20 +545,16 @@ def _solver_arg(p: argparse.ArgumentParser, help_text: str) -> None:
 
 def _positive_int(text: str) -> int:
     try:
-        value = int(text)
-    except ValueError:
+        return _validate.integer("value", int(text), low=1, high=2**1024)
+    except (ValueError, InvalidArgumentError):
         raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
-    return value
 
 
 def _axis_arg(text: str) -> int | str:
-    if text in ("0", "1"):
-        return int(text)
-    if text in ("either", "both"):
-        return text
-    raise argparse.ArgumentTypeError(f"expected 0, 1, either or both, got {text!r}")
+    try:
+        return _validate.axis(text)
+    except InvalidArgumentError:
+        raise argparse.ArgumentTypeError(f"expected 0, 1, either or both, got {text!r}") from None
 
 
 #: The paper's setup (Cinat, Paggi, Borri): RMD surface, D = 2.1, m = 7, side 0.1 mm.

@@ -540,21 +540,20 @@ def _resolve_approaches(problem: ContactProblem, levels: int, approaches: Any) -
     limit = problem.max_approach
     if approaches is None:
         return [float(limit * k / levels) for k in range(levels + 1)]
-    try:
-        arr = np.asarray(approaches, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise ValueError(f"approaches: must be a sequence of numbers, got {approaches!r}") from None
-    if arr.ndim != 1 or arr.size == 0:
-        raise ValueError("approaches: must be a non-empty 1-D sequence of numbers")
+    arr = _validate.real_array("approaches", approaches, ndim=1, finite=False)
+    if arr.size == 0:
+        raise InvalidArgumentError("approaches: must be a non-empty 1-D sequence of numbers")
     if not np.all(np.isfinite(arr)):
-        raise ValueError("approaches: every value must be finite")
+        raise InvalidArgumentError("approaches: every value must be finite")
     if np.any(arr < 0):
-        raise ValueError(f"approaches: must be ≥ 0, got min {arr.min()!r}")
+        raise InvalidArgumentError(f"approaches: must be ≥ 0, got min {arr.min()!r}")
     if np.any(np.diff(arr) <= 0):
-        raise ValueError("approaches: must be strictly increasing")
+        raise InvalidArgumentError("approaches: must be strictly increasing")
     if arr[-1] > limit * (1 + 1e-12):
         what = "max h − mean h (periodic full contact)" if problem.boundary == "periodic" else "h_s"
-        raise ValueError(f"approaches: {arr[-1]!r} exceeds the largest approach {what} = {limit!r}")
+        raise InvalidArgumentError(
+            f"approaches: {arr[-1]!r} exceeds the largest approach {what} = {limit!r}"
+        )
     return [float(a) for a in arr]
 
 
@@ -837,9 +836,13 @@ def sweep(
         A solve that does not reach the KKT threshold :data:`KKT_ACCEPT`.
     """
     if not isinstance(surface, Surface):
-        raise ValueError(f"surface: expected a leakpath Surface, got {type(surface).__name__}")
+        raise InvalidArgumentError(
+            f"surface: expected a leakpath Surface, got {type(surface).__name__}"
+        )
     if min(surface.shape) < 3:
-        raise ValueError(f"surface: needs at least 3 points per axis, got {surface.shape}")
+        raise InvalidArgumentError(
+            f"surface: needs at least 3 points per axis, got {surface.shape}"
+        )
     if not surface.height_range > 0:
         raise InvalidArgumentError(
             "surface: flat (h_s = max h − min h = 0): the flat touches every point at once "
