@@ -346,6 +346,14 @@ class TestMemoryGuards:
     def test_kernel_table(self):
         refused(lambda: kernel_table((10**6, 10**6), 1.0), "shape", MemoryError)
 
+    def test_huge_arrays_that_cost_nothing_until_copied(self):
+        # Zero-stride views: 80 GB of heights that occupy 8 bytes until someone copies them.
+        huge = np.broadcast_to(1.0, (100_000, 100_000))
+        refused(lambda: Surface(huge, 1.0), "heights", MemoryError)
+        refused(lambda: solve(huge, 0.0, dx=1.0), "heights", MemoryError)
+        refused(lambda: nayak_moments(huge, 1.0), "heights", MemoryError)
+        refused(lambda: percolation(huge, dx=1.0), "gap")
+
 
 def _api_cases(small: Surface) -> list[tuple[str, str, Any, Any]]:
     """(function, argument, bad value, call) for every numeric and flag argument."""

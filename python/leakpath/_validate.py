@@ -278,6 +278,8 @@ def real_array(
             f"{name}: must be a {ndim}-D array of real numbers ({exc})"
         ) from None
     kind = arr.dtype.kind
+    if kind == "O" and arr.size and all(_is_real(v) for v in arr.flat):
+        kind = "f"  # an object array of plain real numbers (e.g. from a list of Fractions)
     if kind == "c":
         raise InvalidArgumentError(
             f"{name}: complex values are not accepted (the imaginary part would be dropped); "
@@ -291,6 +293,12 @@ def real_array(
     if arr.ndim != ndim:
         raise InvalidArgumentError(
             f"{name}: must be a {ndim}-D array, got {arr.ndim} dimension(s) (shape {arr.shape})"
+        )
+    limit = memory_budget()
+    if copy and 8 * arr.size > limit:
+        raise too_large(
+            name, f"a copy of a {' × '.join(map(str, arr.shape))} array", 8 * arr.size, limit,
+            "crop or downsample it first",
         )
     if copy:
         out = np.array(arr, dtype=np.float64, order="C", copy=True)

@@ -100,6 +100,13 @@ def _coerce(heights: Any, dx: float | None, *, min_points: int) -> tuple[FloatAr
             )
         return heights.heights, heights.dx
     arr = _validate.real_array("heights", heights, finite=False, copy=False)
+    # Differences and their squares: a few temporaries of the heights' size.
+    limit = _validate.memory_budget()
+    if 4 * 8 * arr.size > limit:
+        raise _validate.too_large(
+            "heights", f"moments of {arr.shape[0]} × {arr.shape[1]} heights", 4 * 8 * arr.size,
+            limit, "crop or downsample them first",
+        )
     if min(arr.shape) < min_points:
         raise InvalidArgumentError(
             f"heights: must have at least {min_points} points along each axis, got shape "
