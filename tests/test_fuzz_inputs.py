@@ -186,6 +186,16 @@ class TestWrongAnswers:
         with pytest.raises(ValueError):
             s.heights[0, 0] = 1.0
 
+    def test_assigning_heights_or_dx_later_is_checked_too(self, small):
+        s = Surface(small.heights, small.dx)
+        refused(lambda: setattr(s, "heights", small.heights + 1j), "heights")
+        refused(lambda: setattr(s, "dx", True), "dx")
+        refused(lambda: setattr(s, "dx", 1e-200), "dx")
+        h = np.zeros((4, 4))
+        s.heights = h
+        h[0, 0] = 1.0
+        assert s.heights[0, 0] == 0.0 and not s.heights.flags.writeable
+
     def test_bare_arrays_are_copied_by_solve_and_problem(self, small):
         h = small.heights.copy()
         prob = ContactProblem(h, dx=small.dx)

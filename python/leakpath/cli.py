@@ -437,10 +437,11 @@ def _run_sweep(
 ) -> int:
     """Run a sweep into ``args.out`` and print its summary (table or JSON)."""
     from .contact import contact_modulus
-    from .sweep import CheckpointMismatch, sweep
+    from .sweep import CheckpointMismatch, _check_levels, sweep
 
     out: Path = args.out
     contact_modulus(E, nu)  # validate before touching the output directory
+    _check_levels(levels, surface.shape, keep_fields)
     if not surface.height_range > 0:
         raise UsageError(
             "SURFACE is flat (h_s = max h - min h = 0): the flat touches every point at once "

@@ -156,6 +156,18 @@ class Surface:
                 f"metadata: must be a dict, got {type(self.metadata).__name__}"
             )
         self.metadata = dict(self.metadata)
+        self.__dict__["_checked"] = True
+
+    def __setattr__(self, name: str, value: Any) -> None:
+        # Assigning new heights or a new dx later goes through the same checks (and copy).
+        if name in ("heights", "dx") and self.__dict__.get("_checked"):
+            heights = value if name == "heights" else _Owned(self.heights)
+            dx = value if name == "dx" else self.dx
+            checked = Surface(heights, dx)
+            object.__setattr__(self, "heights", checked.heights)
+            object.__setattr__(self, "dx", checked.dx)
+            return
+        object.__setattr__(self, name, value)
 
     def __repr__(self) -> str:
         gen = self.metadata.get("generator", self.metadata.get("source"))
