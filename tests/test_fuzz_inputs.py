@@ -315,6 +315,10 @@ class TestFiles:
     def test_path_must_be_a_path(self, path):
         refused(lambda: load(path, dx=1.0), "path")
 
+    def test_save_checks_its_arguments(self, small, tmp_path):
+        refused(lambda: small.save(3), "path")
+        refused(lambda: small.save(tmp_path / "x.npz", overwrite="no"), "overwrite")
+
     def test_directory_and_wrong_signatures(self, tmp_path):
         refused(lambda: load(tmp_path, dx=1.0), "path")
         (tmp_path / "fake.npy").write_text("1 2\n3 4\n")
@@ -355,6 +359,14 @@ class TestMemoryGuards:
 
     def test_kernel_table(self):
         refused(lambda: kernel_table((10**6, 10**6), 1.0), "shape", MemoryError)
+
+    def test_files_larger_than_memory(self, tmp_path, monkeypatch, small):
+        small.save(tmp_path / "s.npz")
+        np.save(tmp_path / "s.npy", small.heights)
+        np.savetxt(tmp_path / "s.txt", small.heights)
+        monkeypatch.setattr(leakpath._validate, "memory_budget", lambda: 1000)
+        for name in ("s.npz", "s.npy", "s.txt"):  # npz: its uncompressed size counts
+            refused(lambda n=name: load(tmp_path / n, dx=small.dx), "path", MemoryError)
 
     def test_huge_arrays_that_cost_nothing_until_copied(self):
         # Zero-stride views: 80 GB of heights that occupy 8 bytes until someone copies them.

@@ -31,6 +31,7 @@ import os
 import secrets
 import stat
 import warnings
+import zipfile
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -243,6 +244,11 @@ class Surface:
         FileNotFoundError
             The target directory does not exist.
         """
+        if isinstance(path, (bytes, bool)) or not isinstance(path, (str, os.PathLike)):
+            raise InvalidArgumentError(
+                f"path: must be a file path (str or os.PathLike), got {_validate.describe(path)}"
+            )
+        overwrite = _validate.flag("overwrite", overwrite)
         target = Path(path)
         if target.suffix.lower() != ".npz":
             raise ValueError(f"path must end in '.npz' to save a surface, got {str(target)!r}")
@@ -382,6 +388,8 @@ def _sniff(path: Path) -> bytes:
 
 
 def _read_npz(path: Path) -> _Raw:
+    with zipfile.ZipFile(path) as archive:  # sizes before inflating anything
+        _check_file_size(path, sum(info.file_size for info in archive.infolist()), 2)
     with np.load(path, allow_pickle=False) as data:
         keys = list(data.files)
         if "heights" in keys:
