@@ -146,10 +146,10 @@ class TestTopLevel:
     @pytest.mark.parametrize(
         "args, needle",
         [
-            ("surface rmd --m 5 --D 3.5 --seed 0 --out {o}", "D (fractal"),
+            ("surface rmd --m 5 --D 3.5 --seed 0 --out {o}", "D: must be a fractal"),
             ("surface rmd --m 5 --D 2.5 --seed 0", "--out"),
             ("surface rmd --m 2.5 --D 2.5 --seed 0 --out {o}", "--m"),
-            ("surface rmd --m 0 --D 2.5 --seed 0 --out {o}", "m must"),
+            ("surface rmd --m 0 --D 2.5 --seed 0 --out {o}", "m: must"),
             ("surface rmd --m 3 --D 2.5 --seed -4 --out {o}", "seed"),
             ("surface rmd --m 3 --D 2.5 --seed 0 --out {o}x", ".npz"),
             ("surface spectral --n 1 --hurst 0.5 --seed 0 --out {o}", "shape"),

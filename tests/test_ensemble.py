@@ -481,7 +481,7 @@ class TestArguments:
             ensemble(
                 params={"m": 4, "D": 2.2, "H": 1}, surfaces=1, out=tmp_path / "a", progress=False
             )
-        with pytest.raises(ValueError, match="D \\(fractal dimension\\)"):
+        with pytest.raises(ValueError, match=r"\bD\b.*fractal dimension"):
             ensemble(
                 params={"m": 4, "D": [2.2, 3.2]}, surfaces=1, out=tmp_path / "a", progress=False
             )

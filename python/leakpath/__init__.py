@@ -5,6 +5,7 @@ reports the contact area, load, free volume, the part of the free volume that be
 channels crossing the interface, and Nayak's spectral moments of the deformed surface.
 """
 
+from . import _validate
 from ._core import __version__
 from ._core import kernel_table as _kernel_table
 from .contact import ContactProblem, ContactState, solve
@@ -42,5 +43,11 @@ def kernel_table(shape: tuple[int, int], dx: float, e_star: float = 1.0):
 
     ``K[0, 0] = 4·dx·ln(1 + √2)/(π E*)``; units: length / (pressure) per unit pressure.
     """
-    ny, nx = shape
-    return _kernel_table(int(ny), int(nx), float(dx), float(e_star))
+    ny, nx = _validate.shape_pair("shape", shape, allow_int=False)
+    limit = _validate.memory_budget()
+    if 8 * ny * nx > limit:
+        raise _validate.too_large(
+            "shape", f"a kernel table of {ny} × {nx} values", 8 * ny * nx, limit,
+            "ask for a smaller table",
+        )
+    return _kernel_table(ny, nx, float(dx), float(e_star))

@@ -11,10 +11,14 @@ arguments and sets ``func`` (a callable ``(argparse.Namespace) -> int``) with
 
 Errors
 ------
-Usage errors (argparse errors, ``ValueError`` raised by the library for a bad argument,
+Usage errors and every error leakpath raises on purpose (argparse errors, a
+:class:`~leakpath.errors.LeakpathError` — a bad argument, a problem too large for memory,
+a solver that did not converge —, any other ``ValueError``, a missing optional package,
 refusing to overwrite a file) print one line ``leakpath: error: ...`` on stderr and exit
-with status 2; other I/O failures (``OSError``) exit with status 1; Ctrl-C exits with 130.
-No traceback is shown for any of them.
+with status 2; I/O failures (``OSError``) exit with status 1; Ctrl-C exits with 130. An
+unexpected error prints one line naming it and exits with status 1; ``--debug`` (anywhere
+on the command line) adds the traceback. No traceback is shown otherwise. ``--json`` output
+is strict JSON: non-finite numbers are written as ``null``.
 """
 
 from __future__ import annotations
@@ -24,13 +28,15 @@ import json
 import math
 import os
 import sys
+import traceback
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
-from . import __version__
+from . import __version__, _validate
+from .errors import InvalidArgumentError, LeakpathError
 from .moments import nayak_moments
-from .surfaces import Surface, load, rmd, spectral
+from .surfaces import FILL_METHODS, Surface, load, rmd, spectral
 
 __all__ = [
     "main",
@@ -79,11 +85,14 @@ def surface_statistics(surface: Surface) -> dict[str, Any]:
         "mean": surface.mean_height,
         "rms_height": surface.rms_height,
     }
+    stats.update(m0=None, m2=None, m4=None, alpha=None)
     if min(surface.shape) >= 3:
-        mom = nayak_moments(surface)
+        try:
+            mom = nayak_moments(surface)
+        except InvalidArgumentError:  # slopes or curvatures beyond the float range for dx
+            stats["m0"] = surface.rms_height**2
+            return stats
         stats.update(m0=mom.m0, m2=mom.m2, m4=mom.m4, alpha=_finite_or_none(mom.alpha))
-    else:
-        stats.update(m0=None, m2=None, m4=None, alpha=None)
     return stats
 
 
@@ -124,10 +133,30 @@ def _report(surface: Surface, out: Path, *, as_json: bool) -> None:
     stats = surface_statistics(surface)
     if as_json:
         payload = {"path": str(out), **stats, "metadata": surface.metadata}
-        print(json.dumps(payload, indent=2, default=str))
+        _print_json(payload)
     else:
         rows = [("file", str(out))] + [(label, stats[key]) for key, label in _STAT_LABELS]
         print(format_table(rows))
+
+
+def json_safe(obj: Any) -> Any:
+    """``obj`` with every non-finite float replaced by ``None`` (JSON has no NaN or ∞)."""
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {k: json_safe(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [json_safe(v) for v in obj]
+    if hasattr(obj, "item") and callable(obj.item) and getattr(obj, "ndim", 1) == 0:
+        return json_safe(obj.item())  # numpy scalars
+    if hasattr(obj, "tolist"):
+        return json_safe(obj.tolist())  # numpy arrays
+    return obj
+
+
+def _print_json(payload: Any, default: Callable[[Any], Any] = str) -> None:
+    """Print strict JSON (``null`` for NaN/∞; refuses to write invalid JSON)."""
+    print(json.dumps(json_safe(payload), indent=2, default=default, allow_nan=False))
 
 
 def _check_out(path: Path, overwrite: bool) -> None:
@@ -315,12 +344,14 @@ def parse_surface_spec(text: str) -> tuple[str, dict[str, Any]] | None:
     return gen, kwargs
 
 
-def _surface_from_arg(text: str, dx: float | None) -> Surface:
+def _surface_from_arg(text: str, dx: float | None, fill: str | None = None) -> Surface:
     spec = parse_surface_spec(text)
     if spec is not None:
         gen, kwargs = spec
         if dx is not None:
             raise UsageError("--dx applies to surface files only, not to a generator spec")
+        if fill is not None:
+            raise UsageError("--fill applies to surface files only, not to a generator spec")
         if gen == "rmd":
             return rmd(kwargs.pop("m"), kwargs.pop("D"), **kwargs)
         return spectral(kwargs.pop("n"), kwargs.pop("hurst"), **kwargs)
@@ -330,7 +361,7 @@ def _surface_from_arg(text: str, dx: float | None) -> Surface:
             f"SURFACE {text!r} is neither an existing file nor a spec such as "
             "'rmd:m=7,D=2.1,seed=0' or 'spectral:n=256,hurst=0.8,seed=1'"
         )
-    return load(path, dx=dx)
+    return load(path, dx=dx, fill=fill)
 
 
 _OWN_PATTERNS = {
@@ -406,10 +437,16 @@ def _run_sweep(
 ) -> int:
     """Run a sweep into ``args.out`` and print its summary (table or JSON)."""
     from .contact import contact_modulus
-    from .sweep import CheckpointMismatch, sweep
+    from .sweep import CheckpointMismatch, _check_levels, sweep
 
     out: Path = args.out
     contact_modulus(E, nu)  # validate before touching the output directory
+    _check_levels(levels, surface.shape, keep_fields)
+    if not surface.height_range > 0:
+        raise UsageError(
+            "SURFACE is flat (h_s = max h - min h = 0): the flat touches every point at once "
+            "and there is no approach to sweep; check the file's heights"
+        )
     _prepare_outdir(out, overwrite=args.overwrite, resume=args.resume)
     try:
         result = sweep(
@@ -463,7 +500,7 @@ def _run_sweep(
             "seconds": result.total_seconds,
             "summary": summary,
         }
-        print(json.dumps(payload, indent=2, default=_json_number))
+        _print_json(payload, default=_json_number)
     else:
         print(description)
         print(format_summary(summary))
@@ -509,20 +546,16 @@ def _solver_arg(p: argparse.ArgumentParser, help_text: str) -> None:
 
 def _positive_int(text: str) -> int:
     try:
-        value = int(text)
-    except ValueError:
+        return _validate.integer("value", int(text), low=1, high=2**1024)
+    except (ValueError, InvalidArgumentError):
         raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
-    return value
 
 
 def _axis_arg(text: str) -> int | str:
-    if text in ("0", "1"):
-        return int(text)
-    if text in ("either", "both"):
-        return text
-    raise argparse.ArgumentTypeError(f"expected 0, 1, either or both, got {text!r}")
+    try:
+        return _validate.axis(text)
+    except InvalidArgumentError:
+        raise argparse.ArgumentTypeError(f"expected 0, 1, either or both, got {text!r}") from None
 
 
 #: The paper's setup (Cinat, Paggi, Borri): RMD surface, D = 2.1, m = 7, side 0.1 mm.
@@ -585,7 +618,7 @@ def _add_paper_parser(subparsers: Any) -> None:
 
 
 def _cmd_sweep(args: argparse.Namespace) -> int:
-    surface = _surface_from_arg(args.surface, args.dx)
+    surface = _surface_from_arg(args.surface, args.dx, args.fill)
     if args.unit:
         surface.metadata["unit"] = args.unit
     unit = surface.metadata.get("unit", "the surface's length unit")
@@ -626,6 +659,13 @@ def _add_sweep_parser(subparsers: Any) -> None:
     )
     p.add_argument("surface", metavar="SURFACE", help="surface file or generator spec")
     p.add_argument("--dx", type=float, help="grid spacing for files that do not store it")
+    p.add_argument(
+        "--fill",
+        choices=FILL_METHODS,
+        default=None,
+        help="fill a file's undefined (NaN or masked) points: nearest (mean of the nearest "
+        "defined points) or mean (mean height); default: refuse such a file",
+    )
     p.add_argument("--unit", help="name of the length unit, for labels and metadata")
     p.add_argument("--levels", type=_positive_int, default=20, help="number of steps (default 20)")
     _solver_arg(p, "contact solver (default auto: the fast exact active-set solver)")
@@ -744,7 +784,7 @@ def _cmd_ensemble(args: argparse.Namespace) -> int:
         print(f"{PROG}: error: {_one_line(str(exc))}", file=sys.stderr)
         return 1
     if args.json:
-        print(json.dumps(result.summary(), indent=2))
+        _print_json(result.summary())
     else:
         print(format_table(_ensemble_summary_rows(result)))
     return 0
@@ -831,12 +871,35 @@ def build_parser() -> argparse.ArgumentParser:
         description="Rough-surface contact mechanics and the percolating free volume.",
     )
     parser.add_argument("--version", action="version", version=f"{PROG} {__version__}")
+    parser.add_argument(
+        "--debug", action="store_true", help="show the traceback of an unexpected error"
+    )
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     _add_surface_parser(subparsers)
     _add_paper_parser(subparsers)
     _add_sweep_parser(subparsers)
     _add_ensemble_parser(subparsers)
+    _add_debug_flags(parser)
     return parser
+
+
+def _add_debug_flags(parser: argparse.ArgumentParser) -> None:
+    """``--debug`` on the parser and on every sub-command, so it may go anywhere."""
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for sub in action.choices.values():
+                sub.add_argument(
+                    "--debug",
+                    action="store_true",
+                    default=argparse.SUPPRESS,
+                    help="show the traceback of an unexpected error",
+                )
+                _add_debug_flags(sub)
+
+
+def _fail(message: str, status: int) -> int:
+    print(f"{PROG}: error: {_one_line(message)}", file=sys.stderr)
+    return status
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -847,11 +910,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except SystemExit as exc:  # --help/--version (0) or a usage error (2)
         return int(exc.code) if isinstance(exc.code, int) else (0 if exc.code is None else 2)
     func: Callable[[argparse.Namespace], int] = args.func
+    debug = bool(getattr(args, "debug", False))
     try:
         return int(func(args))
-    except (UsageError, ValueError) as exc:
-        print(f"{PROG}: error: {_one_line(str(exc))}", file=sys.stderr)
-        return 2
     except BrokenPipeError:
         # The reader went away (`leakpath ... | head`): stop quietly, with the status of a
         # process ended by SIGPIPE as other command-line tools do. Output files are written
@@ -861,12 +922,28 @@ def main(argv: Sequence[str] | None = None) -> int:
         os.dup2(devnull, sys.stdout.fileno())
         os.close(devnull)
         return 141  # 128 + SIGPIPE (13)
-    except OSError as exc:
-        print(f"{PROG}: error: {_one_line(str(exc))}", file=sys.stderr)
-        return 1
     except KeyboardInterrupt:
         print(f"{PROG}: interrupted", file=sys.stderr)
         return 130
+    except (UsageError, LeakpathError, ValueError, ImportError) as exc:
+        # Bad arguments, files leakpath cannot read, problems refused up front (too large
+        # for memory), solvers that did not converge, a missing optional package.
+        if debug:
+            traceback.print_exc()
+        return _fail(str(exc), 2)
+    except OSError as exc:
+        if debug:
+            traceback.print_exc()
+        return _fail(str(exc), 1)
+    except Exception as exc:  # a defect or an environment failure: name it, one line
+        if debug:
+            traceback.print_exc()
+            return _fail(f"unexpected {type(exc).__name__}: {exc}", 1)
+        return _fail(
+            f"unexpected {type(exc).__name__}: {exc} (run again with --debug to see the "
+            "traceback)",
+            1,
+        )
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -15,14 +15,17 @@ at ``Δ = max h − mean h`` and a larger approach is an error.
 
 from __future__ import annotations
 
+import math
 import os
+import sys
 from dataclasses import dataclass, field
 from functools import cached_property
 from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
-from . import _core
+from . import _core, _validate
+from .errors import InvalidArgumentError
 from .surfaces import Surface
 
 if TYPE_CHECKING:
@@ -46,12 +49,25 @@ def default_memory_limit() -> int:
 
 
 def contact_modulus(E: float, nu: float) -> float:
-    """``E* = E / (1 − ν²)``; validates ``E > 0`` and ``0 ≤ ν < 0.5``."""
-    if not (np.isfinite(E) and E > 0):
-        raise ValueError(f"E: Young's modulus must be a positive finite number, got {E!r}")
-    if not (np.isfinite(nu) and 0.0 <= nu < 0.5):
-        raise ValueError(f"nu: Poisson's ratio must be in [0, 0.5), got {nu!r}")
-    return float(E) / (1.0 - float(nu) ** 2)
+    """``E* = E / (1 − ν²)`` [pressure], for ``E > 0`` and ``−1 < ν ≤ 0.5``.
+
+    ``ν = 0.5`` (incompressible, e.g. rubber) gives ``E* = 4E/3``; ``ν < 0`` (auxetic
+    materials) is allowed down to the thermodynamic bound ``ν > −1``. ``E*`` must be a
+    normal double (so the compliance ``∝ 1/E*`` does not overflow); otherwise ``E`` is
+    refused.
+    """
+    e = _validate.positive("E", E, what="a positive finite Young's modulus")
+    poisson = _validate.real(
+        "nu", nu, low=-1.0, high=0.5, low_open=True, what="a Poisson's ratio in (-1, 0.5]"
+    )
+    e_star = e / (1.0 - poisson * poisson)
+    if not (sys.float_info.min <= e_star < math.inf):
+        raise InvalidArgumentError(
+            f"E: {E!r} gives a contact modulus E* = E/(1 − ν²) = {e_star!r} outside the normal "
+            "floating-point range (the compliance 1/E* would overflow, or E* itself); express "
+            "E in another pressure unit"
+        )
+    return e_star
 
 
 @dataclass(eq=False)
@@ -171,13 +187,15 @@ class ContactState:
 
 def _as_surface(surface: Surface | np.ndarray, dx: float | None) -> Surface:
     if isinstance(surface, Surface):
+        if dx is not None and _validate.spacing("dx", dx) != surface.dx:
+            raise InvalidArgumentError(
+                f"dx: {dx!r} conflicts with the surface's own dx = {surface.dx!r}; omit dx, or "
+                "build Surface(surface.heights, dx) to rescale"
+            )
         return surface
-    h = np.asarray(surface)
-    if h.ndim != 2:
-        raise ValueError(f"heights: expected a 2-D array, got {h.ndim} dimension(s)")
     if dx is None:
-        raise ValueError("dx: give the grid spacing when passing a bare height array")
-    return Surface(np.asarray(h, dtype=np.float64), float(dx))
+        raise InvalidArgumentError("dx: give the grid spacing when passing a bare height array")
+    return Surface(surface, dx)  # copies and validates heights and dx
 
 
 class ContactProblem:
@@ -198,11 +216,11 @@ class ContactProblem:
         memory_limit: int | None = None,
     ) -> None:
         self.surface = _as_surface(surface, dx)
-        if boundary not in ("free", "periodic"):
-            raise ValueError(f"boundary: must be 'free' or 'periodic', got {boundary!r}")
-        self.boundary = boundary
+        self.boundary = _validate.boundary(boundary)
         self.e_star = contact_modulus(E, nu)
-        self.memory_limit = int(memory_limit or default_memory_limit())
+        _validate.contact_scales(self.e_star, self.surface.dx, self.surface.height_range)
+        limit = _validate.memory_limit(memory_limit)
+        self.memory_limit = default_memory_limit() if limit is None else limit
         h = np.ascontiguousarray(self.surface.heights, dtype=np.float64)
         self._h = h
         self.h_max = float(h.max())
@@ -220,12 +238,7 @@ class ContactProblem:
         return self.h_range
 
     def _check_approach(self, approach: float) -> float:
-        try:
-            a = float(approach)
-        except (TypeError, ValueError):
-            raise ValueError(f"approach: must be a number, got {approach!r}") from None
-        if not np.isfinite(a) or a < 0:
-            raise ValueError(f"approach: must be a finite number ≥ 0, got {approach!r}")
+        a = _validate.real("approach", approach, low=0.0, what="a finite number ≥ 0")
         limit = self.max_approach
         if a > limit * (1 + 1e-12) + 1e-300:
             what = (
@@ -233,7 +246,7 @@ class ContactProblem:
                 if self.boundary == "periodic"
                 else "h_s = max h − min h"
             )
-            raise ValueError(
+            raise InvalidArgumentError(
                 f"approach: {a:.6g} exceeds {what} = {limit:.6g}; "
                 "nothing more can be pressed into contact"
             )
@@ -264,11 +277,9 @@ class ContactProblem:
         contact mask from that set.
         """
         a = self._check_approach(approach)
-        if solver not in SOLVERS:
-            raise ValueError(f"solver: must be one of {', '.join(SOLVERS)}; got {solver!r}")
-        tol = DEFAULT_TOL if tol is None else float(tol)
-        if not (np.isfinite(tol) and tol > 0):
-            raise ValueError(f"tol: must be a positive number, got {tol!r}")
+        _validate.choice("solver", solver, SOLVERS)
+        tol = DEFAULT_TOL if tol is None else _validate.positive("tol", tol)
+        max_iter = _validate.optional_integer("max_iter", max_iter, low=1)
         if solver == "auto":
             return self._solve_auto(a, warm_start, tol, max_iter)
         if solver == "polonsky-keer":

@@ -44,11 +44,15 @@ agree (the FD stencils underestimate a mode of wavevector q by the factors
 
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass
 from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 import numpy.typing as npt
+
+from . import _validate
+from .errors import InvalidArgumentError
 
 if TYPE_CHECKING:  # pragma: no cover
     from .surfaces import Surface
@@ -89,45 +93,79 @@ def _coerce(heights: Any, dx: float | None, *, min_points: int) -> tuple[FloatAr
     from .surfaces import Surface  # local import: surfaces imports this module
 
     if isinstance(heights, Surface):
-        if dx is not None and float(dx) != heights.dx:
-            raise ValueError(
-                f"dx={dx!r} differs from the surface's dx={heights.dx!r}; "
+        if dx is not None and _validate.spacing("dx", dx) != heights.dx:
+            raise InvalidArgumentError(
+                f"dx: {dx!r} differs from the surface's dx={heights.dx!r}; "
                 "omit dx when passing a Surface"
             )
-        dx = heights.dx
-        heights = heights.heights
-    arr = np.asarray(heights, dtype=np.float64)
-    if arr.ndim != 2:
-        raise ValueError(f"heights must be a 2-D array (ny, nx), got {arr.ndim} dimension(s)")
+        return heights.heights, heights.dx
+    arr = _validate.real_array("heights", heights, finite=False, copy=False)
+    # Differences and their squares: a few temporaries of the heights' size.
+    limit = _validate.memory_budget()
+    if 4 * 8 * arr.size > limit:
+        raise _validate.too_large(
+            "heights", f"moments of {arr.shape[0]} × {arr.shape[1]} heights", 4 * 8 * arr.size,
+            limit, "crop or downsample them first",
+        )
     if min(arr.shape) < min_points:
-        raise ValueError(
-            f"heights must have at least {min_points} points along each axis, got shape {arr.shape}"
+        raise InvalidArgumentError(
+            f"heights: must have at least {min_points} points along each axis, got shape "
+            f"{arr.shape}"
         )
     if not np.all(np.isfinite(arr)):
-        raise ValueError("heights contains NaN or infinite values; fill or crop them first")
+        raise InvalidArgumentError(
+            "heights: contains NaN or infinite values; fill or crop them first"
+        )
+    if arr.size and float(np.max(np.abs(arr))) > _validate.MAX_ABS_HEIGHT:
+        raise InvalidArgumentError(
+            f"heights: values beyond {_validate.MAX_ABS_HEIGHT:g} overflow when squared; "
+            "express them in a larger length unit"
+        )
     if dx is None:
-        raise ValueError("dx (grid spacing) is required when heights is a plain array")
-    if isinstance(dx, bool) or not isinstance(dx, (int, float, np.integer, np.floating)):
-        raise ValueError(f"dx must be a positive finite number, got {dx!r}")
-    dx_f = float(dx)
-    if not (np.isfinite(dx_f) and dx_f > 0.0):
-        raise ValueError(f"dx must be a positive finite number, got {dx!r}")
-    return arr, dx_f
+        raise InvalidArgumentError("dx: the grid spacing is required when heights is a plain array")
+    return arr, _validate.spacing("dx", dx)
+
+
+def _mean_sq_per_dx(d: FloatArray, dx: float, power: int, what: str) -> float:
+    """``mean(d²) / dx^(2·power)``: the mean square of differences ``d`` divided by ``dx^power``.
+
+    The squares are taken on the raw differences (heights are bounded, so they stay finite)
+    and divided by ``dx²`` ``power`` times; a result that does not fit in a double (a slope
+    or curvature scale far beyond the floating-point range for this ``dx``) is refused
+    instead of coming back as ``inf`` or ``0``.
+    """
+    raw = float(np.mean(d * d))
+    if raw == 0.0:
+        return 0.0
+    exponent = math.log10(raw) - 2 * power * math.log10(dx)
+    if not -300.0 < exponent < 300.0:
+        raise InvalidArgumentError(
+            f"dx: with dx = {dx!r} the mean square {what} of these heights is about "
+            f"1e{exponent:+.0f}, beyond the floating-point range; express heights and dx in "
+            "a length unit closer to the surface's scale"
+        )
+    out = raw
+    dx2 = dx * dx
+    for _ in range(power):
+        out /= dx2
+    return out
 
 
 def _fd_slopes_sq(s: FloatArray, dx: float) -> tuple[float, float]:
     """``(⟨s_x²⟩, ⟨s_y²⟩)`` with forward differences (axis 1 = x, axis 0 = y)."""
-    sx = np.diff(s, axis=1) / dx
-    sy = np.diff(s, axis=0) / dx
-    return float(np.mean(sx * sx)), float(np.mean(sy * sy))
+    sx2 = _mean_sq_per_dx(np.diff(s, axis=1), dx, 1, "slope")
+    sy2 = _mean_sq_per_dx(np.diff(s, axis=0), dx, 1, "slope")
+    return sx2, sy2
 
 
 def _fd_curvatures_sq(s: FloatArray, dx: float) -> tuple[float, float]:
     """``(⟨s_xx²⟩, ⟨s_yy²⟩)`` with central second differences at interior points."""
-    dx2 = dx * dx
-    sxx = (s[:, 2:] - 2.0 * s[:, 1:-1] + s[:, :-2]) / dx2
-    syy = (s[2:, :] - 2.0 * s[1:-1, :] + s[:-2, :]) / dx2
-    return float(np.mean(sxx * sxx)), float(np.mean(syy * syy))
+    sxx = s[:, 2:] - 2.0 * s[:, 1:-1] + s[:, :-2]
+    syy = s[2:, :] - 2.0 * s[1:-1, :] + s[:-2, :]
+    return (
+        _mean_sq_per_dx(sxx, dx, 2, "curvature"),
+        _mean_sq_per_dx(syy, dx, 2, "curvature"),
+    )
 
 
 def _spectral_weights(n: int, dx: float) -> tuple[FloatArray, FloatArray]:
@@ -183,12 +221,12 @@ def nayak_moments(
 
     Raises
     ------
-    ValueError
-        ``heights`` not 2-D, with fewer than 3 points on an axis, or containing NaN/inf;
-        ``dx`` missing, non-positive or not finite; unknown ``method``.
+    InvalidArgumentError (a ``ValueError``)
+        ``heights`` not a 2-D array of real numbers, with fewer than 3 points on an axis, or
+        containing NaN/inf; ``dx`` missing, non-positive, not finite or out of range
+        (``dx²`` not a normal double); unknown ``method``.
     """
-    if method not in ("fd", "spectral"):
-        raise ValueError(f"method must be 'fd' or 'spectral', got {method!r}")
+    _validate.choice("method", method, ("fd", "spectral"))
     s, dx_f = _coerce(heights, dx, min_points=3)
     mean = float(np.mean(s))
     d = s - mean
@@ -207,8 +245,15 @@ def nayak_moments(
         px = power.sum(axis=0)  # power per q_x
         py = power.sum(axis=1)  # power per q_y
         qx2, qy2 = qx * qx, qy * qy
-        m2 = 0.5 * (float(np.sum(wx * qx2 * px)) + float(np.sum(wy * qy2 * py)))
-        m4 = 0.5 * (float(np.sum(wx * qx2 * qx2 * px)) + float(np.sum(wy * qy2 * qy2 * py)))
+        with np.errstate(over="ignore", under="ignore"):
+            m2 = 0.5 * (float(np.sum(wx * qx2 * px)) + float(np.sum(wy * qy2 * py)))
+        with np.errstate(over="ignore", under="ignore"):
+            m4 = 0.5 * (float(np.sum(wx * qx2 * qx2 * px)) + float(np.sum(wy * qy2 * qy2 * py)))
+        if not (math.isfinite(m2) and math.isfinite(m4)):
+            raise InvalidArgumentError(
+                f"dx: with dx = {dx_f!r} the spectral moments of these heights overflow; "
+                "express heights and dx in a length unit closer to the surface's scale"
+            )
     return Moments(m0=m0, m2=m2, m4=m4, alpha=_alpha(m0, m2, m4))
 
 
@@ -229,8 +274,10 @@ def rms_height(heights: FloatArray | Surface | npt.ArrayLike) -> float:
     """
     from .surfaces import Surface
 
-    arr = heights.heights if isinstance(heights, Surface) else heights
-    s, _ = _coerce(arr, 1.0, min_points=1)
+    if isinstance(heights, Surface):
+        s = heights.heights
+    else:
+        s, _ = _coerce(heights, 1.0, min_points=1)
     d = s - float(np.mean(s))
     return float(np.sqrt(np.mean(d * d)))
 

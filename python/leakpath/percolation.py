@@ -29,13 +29,13 @@ The labelling runs in Rust on all cores (``threads`` to limit it); labels are nu
 
 from __future__ import annotations
 
-import numbers
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-from . import _core
+from . import _core, _validate
+from .errors import InvalidArgumentError
 
 __all__ = [
     "CLASS_NAMES",
@@ -51,8 +51,6 @@ __all__ = [
 CONTACT, SPANNING, DEAD_END, TRAPPED = 0, 1, 2, 3
 #: Names of the class codes 0–3.
 CLASS_NAMES: tuple[str, ...] = ("contact", "spanning", "dead-end", "trapped")
-
-_FLOWS = {0: "0", 1: "1", "0": "0", "1": "1", "either": "either", "both": "both"}
 
 
 @dataclass(frozen=True, eq=False)
@@ -131,30 +129,8 @@ class Percolation:
 
 def _flow(axis: Any) -> tuple[str, int | str]:
     """Rust flow name and the canonical axis for ``axis``."""
-    if isinstance(axis, (bool, np.bool_)):
-        raise ValueError(f"axis: must be 0, 1, 'either' or 'both', got {axis!r}")
-    if isinstance(axis, numbers.Integral):
-        axis = int(axis)
-    elif isinstance(axis, str):
-        axis = axis.strip().lower()
-    if not isinstance(axis, (int, str)) or axis not in _FLOWS:
-        raise ValueError(f"axis: must be 0, 1, 'either' or 'both', got {axis!r}")
-    flow = _FLOWS[axis]
-    return flow, int(flow) if flow in ("0", "1") else flow
-
-
-def _connectivity(connectivity: Any) -> int:
-    if isinstance(connectivity, (bool, np.bool_)) or not isinstance(connectivity, numbers.Integral):
-        raise ValueError(
-            f"connectivity: must be 4 (edge neighbours) or 8 (edges and corners), "
-            f"got {connectivity!r}"
-        )
-    if int(connectivity) not in (4, 8):
-        raise ValueError(
-            f"connectivity: must be 4 (edge neighbours) or 8 (edges and corners), "
-            f"got {connectivity!r}"
-        )
-    return int(connectivity)
+    canonical = _validate.axis(axis)
+    return str(canonical), canonical
 
 
 def _is_state(obj: Any) -> bool:
@@ -199,19 +175,20 @@ def percolation(
             ``periodic``, ``dx`` or ``threads``.
     """
     flow, axis_used = _flow(axis)
-    conn = _connectivity(connectivity)
-    if threads is not None and (
-        isinstance(threads, bool) or not isinstance(threads, numbers.Integral) or threads < 1
-    ):
-        raise ValueError(f"threads: must be a positive integer or None, got {threads!r}")
+    conn = _validate.connectivity(connectivity)
+    threads = _validate.optional_integer(
+        "threads", threads, low=1, high=4096, what="a positive integer (at most 4096) or None"
+    )
 
     boundary = None
     if _is_state(state_or_gap):
         state = state_or_gap
         if dx is not None:
-            raise ValueError("dx: taken from the contact state; pass a gap array to set it")
+            raise InvalidArgumentError(
+                "dx: taken from the contact state; pass a gap array to set it"
+            )
         if contact is not None:
-            raise ValueError(
+            raise InvalidArgumentError(
                 "contact: taken from the contact state (p > 0); pass a gap array to set it"
             )
         gap_in, contact, dx = state.gap, state.contact, state.dx
@@ -219,44 +196,37 @@ def percolation(
     else:
         gap_in = state_or_gap
         if dx is None:
-            raise ValueError("dx: the grid spacing is required when a gap array is given")
+            raise InvalidArgumentError(
+                "dx: the grid spacing is required when a gap array is given"
+            )
 
-    try:
-        gap = np.asarray(gap_in, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"gap: must be a 2-D array of numbers ({exc})") from None
-    if gap.ndim != 2:
-        raise ValueError(f"gap: must be a 2-D array, got shape {gap.shape}")
+    # NaN and infinite gaps are refused by the core, with the same message.
+    gap = _validate.real_array("gap", gap_in, finite=False, copy=False)
     if gap.size == 0:
-        raise ValueError(f"gap: must have at least one cell, got shape {gap.shape}")
+        raise InvalidArgumentError(f"gap: must have at least one cell, got shape {gap.shape}")
 
     if contact is not None:
         contact = np.asarray(contact)
         if contact.dtype != np.bool_:
-            raise ValueError(
+            raise InvalidArgumentError(
                 f"contact: must be a boolean mask (e.g. pressure > 0), got dtype {contact.dtype}"
             )
         if contact.shape != gap.shape:
-            raise ValueError(f"contact: must have the gap's shape {gap.shape}, got {contact.shape}")
+            raise InvalidArgumentError(
+                f"contact: must have the gap's shape {gap.shape}, got {contact.shape}"
+            )
 
-    try:
-        dx_f = float(dx)  # type: ignore[arg-type]
-    except (TypeError, ValueError):
-        raise ValueError(f"dx: must be a positive number, got {dx!r}") from None
-    if not (np.isfinite(dx_f) and dx_f > 0):
-        raise ValueError(f"dx: must be a positive finite grid spacing, got {dx!r}")
+    dx_f = _validate.spacing("dx", dx)
 
     if periodic is None:
         wrap = boundary == "periodic" and flow in ("0", "1")
-    elif isinstance(periodic, (bool, np.bool_)):
-        wrap = bool(periodic)
+    else:
+        wrap = _validate.flag("periodic", periodic)
         if wrap and flow not in ("0", "1"):
-            raise ValueError(
+            raise InvalidArgumentError(
                 f"periodic: wrap is across the flow axis, so it needs axis 0 or 1, "
                 f"not {axis_used!r} (every edge is an inlet or outlet there)"
             )
-    else:
-        raise ValueError(f"periodic: must be True, False or None, got {periodic!r}")
 
     res = _core.classify_clusters(
         gap,

@@ -76,7 +76,6 @@ import hashlib
 import io
 import json
 import math
-import numbers
 import os
 import platform
 import secrets
@@ -93,8 +92,9 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import numpy.typing as npt
 
-from . import __version__
+from . import __version__, _validate
 from .contact import SOLVERS, ContactProblem, ContactState
+from .errors import InvalidArgumentError
 from .moments import nayak_moments
 from .surfaces import Surface
 
@@ -517,48 +517,52 @@ _DEFINITIONS = {
 
 
 # ---------------------------------------------------------------------------- validation
-def _check_levels(levels: Any) -> int:
-    if isinstance(levels, bool) or not isinstance(levels, numbers.Integral) or int(levels) < 1:
-        raise ValueError(f"levels: must be an integer ≥ 1, got {levels!r}")
-    return int(levels)
+def _check_levels(levels: Any, shape: tuple[int, int], keep_fields: bool) -> int:
+    n = _validate.integer("levels", levels, low=1, high=2**1024, what="an integer ≥ 1")
+    # Each level keeps its row (~16 KiB with its approach), its packed contact mask and
+    # class map (≤ 2 bytes per point compressed) and, with keep_fields, pressure, gap and
+    # labels twice over (20 bytes per point, stacked at the end): refuse before solving.
+    points = shape[0] * shape[1]
+    per_level = 16 * 1024 + 2 * points + (40 * points if keep_fields else 0)
+    limit = _validate.memory_budget()
+    if (n + 1) * per_level > limit:
+        raise _validate.too_large(
+            "levels",
+            f"a sweep of {n} levels on {shape[0]} × {shape[1]} points",
+            (n + 1) * per_level,
+            limit,
+            f"use at most {max(limit // per_level - 1, 1)} levels",
+        )
+    return n
 
 
 def _resolve_approaches(problem: ContactProblem, levels: int, approaches: Any) -> list[float]:
     limit = problem.max_approach
     if approaches is None:
         return [float(limit * k / levels) for k in range(levels + 1)]
-    try:
-        arr = np.asarray(approaches, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise ValueError(f"approaches: must be a sequence of numbers, got {approaches!r}") from None
-    if arr.ndim != 1 or arr.size == 0:
-        raise ValueError("approaches: must be a non-empty 1-D sequence of numbers")
+    arr = _validate.real_array("approaches", approaches, ndim=1, finite=False)
+    if arr.size == 0:
+        raise InvalidArgumentError("approaches: must be a non-empty 1-D sequence of numbers")
     if not np.all(np.isfinite(arr)):
-        raise ValueError("approaches: every value must be finite")
+        raise InvalidArgumentError("approaches: every value must be finite")
     if np.any(arr < 0):
-        raise ValueError(f"approaches: must be ≥ 0, got min {arr.min()!r}")
+        raise InvalidArgumentError(f"approaches: must be ≥ 0, got min {arr.min()!r}")
     if np.any(np.diff(arr) <= 0):
-        raise ValueError("approaches: must be strictly increasing")
+        raise InvalidArgumentError("approaches: must be strictly increasing")
     if arr[-1] > limit * (1 + 1e-12):
         what = "max h − mean h (periodic full contact)" if problem.boundary == "periodic" else "h_s"
-        raise ValueError(f"approaches: {arr[-1]!r} exceeds the largest approach {what} = {limit!r}")
+        raise InvalidArgumentError(
+            f"approaches: {arr[-1]!r} exceeds the largest approach {what} = {limit!r}"
+        )
     return [float(a) for a in arr]
 
 
 def _check_axis(axis: Any) -> Any:
-    if isinstance(axis, (bool, np.bool_)):
-        raise ValueError(f"axis: must be 0, 1, 'either' or 'both', got {axis!r}")
-    if isinstance(axis, numbers.Integral) and int(axis) in (0, 1):
-        return int(axis)
-    if isinstance(axis, str) and axis in ("either", "both"):
-        return axis
-    raise ValueError(f"axis: must be 0, 1, 'either' or 'both', got {axis!r}")
+    return _validate.axis(axis)
 
 
 def _check_connectivity(connectivity: Any) -> int:
-    if isinstance(connectivity, bool) or connectivity not in (4, 8):
-        raise ValueError(f"connectivity: must be 4 or 8, got {connectivity!r}")
-    return int(connectivity)
+    return _validate.connectivity(connectivity)
 
 
 # ---------------------------------------------------------------------------- one level
@@ -832,14 +836,22 @@ def sweep(
         A solve that does not reach the KKT threshold :data:`KKT_ACCEPT`.
     """
     if not isinstance(surface, Surface):
-        raise ValueError(f"surface: expected a leakpath Surface, got {type(surface).__name__}")
+        raise InvalidArgumentError(
+            f"surface: expected a leakpath Surface, got {type(surface).__name__}"
+        )
     if min(surface.shape) < 3:
-        raise ValueError(f"surface: needs at least 3 points per axis, got {surface.shape}")
-    if solver not in SOLVERS:
-        raise ValueError(f"solver: must be one of {', '.join(SOLVERS)}; got {solver!r}")
-    if not isinstance(warm_start, (bool, np.bool_)):
-        raise ValueError(f"warm_start: must be True or False, got {warm_start!r}")
-    n_levels = _check_levels(levels)
+        raise InvalidArgumentError(
+            f"surface: needs at least 3 points per axis, got {surface.shape}"
+        )
+    if not surface.height_range > 0:
+        raise InvalidArgumentError(
+            "surface: flat (h_s = max h − min h = 0): the flat touches every point at once "
+            "and there is no approach to sweep; check the heights (units, a constant file)"
+        )
+    _validate.choice("solver", solver, SOLVERS)
+    warm_start = _validate.flag("warm_start", warm_start)
+    keep_fields = _validate.flag("keep_fields", keep_fields)
+    n_levels = _check_levels(levels, surface.shape, keep_fields)
     axis = _check_axis(axis)
     connectivity = _check_connectivity(connectivity)
     problem = ContactProblem(surface, E=E, nu=nu, boundary=boundary)  # type: ignore[arg-type]

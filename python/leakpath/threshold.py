@@ -5,9 +5,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-import numpy as np
-
+from . import _validate
 from .contact import Boundary, ContactProblem, ContactState, SolverName
+from .errors import InvalidArgumentError
 from .surfaces import Surface
 
 
@@ -55,13 +55,21 @@ def percolation_threshold(
     percolating level below. The result assumes the spanning property changes once along
     the sweep, as it does when the contact set grows with the approach.
     """
-    prob = ContactProblem(surface, E=E, nu=nu, boundary=boundary)
+    if not isinstance(surface, Surface):
+        raise InvalidArgumentError(
+            f"surface: expected a leakpath Surface, got {type(surface).__name__}"
+        )
     hs = surface.height_range
-    tol = 1e-4 * hs if atol is None else float(atol)
-    if not (np.isfinite(tol) and tol > 0):
-        raise ValueError(f"atol: must be a positive number, got {atol!r}")
-    if int(max_solves) < 2:
-        raise ValueError(f"max_solves: must be at least 2, got {max_solves!r}")
+    if not hs > 0:
+        raise InvalidArgumentError(
+            "surface: flat (h_s = max h − min h = 0): every point touches at once, so there "
+            "is no percolation threshold to find"
+        )
+    tol = 1e-4 * hs if atol is None else _validate.positive("atol", atol)
+    max_solves = _validate.integer("max_solves", max_solves, low=2, high=100_000)
+    _validate.axis(axis)
+    _validate.connectivity(connectivity)
+    prob = ContactProblem(surface, E=E, nu=nu, boundary=boundary)
 
     def spans(state: ContactState) -> bool:
         return bool(state.percolation(axis=axis, connectivity=connectivity).percolates)
