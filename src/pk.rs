@@ -129,7 +129,7 @@ use crate::influence::{love_displacement, Kernel};
 use crate::operator::{check_shape, padded, Boundary, Operator};
 
 /// Default KKT tolerance, relative to the height range.
-pub const DEFAULT_TOL: f64 = 1e-10;
+pub const DEFAULT_TOL: f64 = 1e-12;
 
 /// Points per reduction chunk: fixed, so the summation order is independent of the thread count.
 pub const CHUNK: usize = 4096;

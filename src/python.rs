@@ -369,7 +369,8 @@ mod contact_py {
     #[pyclass(name = "ContactProblem", module = "leakpath._core")]
     pub(super) struct ContactProblem {
         kernel: Kernel,
-        op: Operator,
+        /// Shared with the Polonsky–Keer binding, which reuses it across solves.
+        pub(super) op: Operator,
         h: Vec<f64>,
         factor: Factor,
     }
@@ -621,7 +622,8 @@ mod pk_py {
     #[pyfunction]
     #[pyo3(signature = (
         heights, dx, e_star, boundary="free", approach=None, mean_pressure=None, tol=None,
-        max_iter=None, initial_pressure=None, memory_limit=None, precondition=true
+        max_iter=None, initial_pressure=None, memory_limit=None, precondition=true,
+        operator_of=None
     ))]
     #[allow(clippy::too_many_arguments)]
     pub(super) fn solve_polonsky_keer<'py>(
@@ -637,7 +639,9 @@ mod pk_py {
         initial_pressure: Option<PyReadonlyArray2<'py, f64>>,
         memory_limit: Option<u64>,
         precondition: bool,
+        operator_of: Option<PyRef<'py, super::contact_py::ContactProblem>>,
     ) -> PyResult<Bound<'py, PyDict>> {
+        let op = operator_of.as_ref().map(|cp| &cp.op);
         let [ny, nx] = [heights.shape()[0], heights.shape()[1]];
         let control = match (approach, mean_pressure) {
             (Some(d), None) => Control::Approach(d),
@@ -701,7 +705,11 @@ mod pk_py {
                 precondition,
             };
             catch_unwind(AssertUnwindSafe(|| {
-                super::on_solver_pool(ny * nx, || pk::solve(&problem, control, &opts))
+                super::on_solver_pool(ny * nx, || match op {
+                    // The operator of a kept ContactProblem: no kernel or FFT set-up per solve.
+                    Some(op) => pk::solve_with_operator(op, &problem, control, &opts),
+                    None => pk::solve(&problem, control, &opts),
+                })
             }))
         });
         let seconds = start.elapsed().as_secs_f64();

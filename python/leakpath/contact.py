@@ -9,8 +9,10 @@ Conventions (all lengths in the surface's units, pressures in the units of ``E``
 * contact modulus ``E* = E / (1 − ν²)``.
 
 ``boundary="free"``: the patch sits on an infinite half-space (``u → 0`` far away).
+Any approach ``Δ ≥ 0`` is allowed (about half a rough patch is in contact at ``Δ = h_s``).
 ``boundary="periodic"``: the surface repeats and ``u`` has zero mean; full contact is reached
-at ``Δ = max h − mean h`` and a larger approach is an error.
+at ``Δ = max h − mean h`` and a larger approach is an error. The conventions are written out
+in ``docs/conventions.md``.
 """
 
 from __future__ import annotations
@@ -35,8 +37,16 @@ Boundary = Literal["free", "periodic"]
 SolverName = Literal["lawson-hanson", "active-set", "polonsky-keer", "auto"]
 SOLVERS = ("lawson-hanson", "active-set", "polonsky-keer", "auto")
 
-#: Default KKT tolerance relative to the height range ``h_s``.
-DEFAULT_TOL = 1e-11
+#: Default KKT tolerance relative to the height range ``h_s``, for every solver. At this
+#: tolerance the Polonsky–Keer contact set no longer changes: it equals the exact solvers'.
+DEFAULT_TOL = 1e-12
+
+#: ``solver="auto"`` uses the exact block active set on grids of at most this many points
+#: and Polonsky–Keer above. Measured (``benchmarks/auto_policy_bench.py``): on 33² the
+#: active set is faster than Polonsky–Keer at every approach, on 65² it is slower from
+#: moderate contact on, and on 129² it is 10–100× slower at half contact (its factor work
+#: grows like k³ in the contact points k, Polonsky–Keer like N log N per iteration).
+AUTO_ACTIVE_SET_MAX_POINTS = 48 * 48
 
 
 def default_memory_limit() -> int:
@@ -232,58 +242,86 @@ class ContactProblem:
 
     @property
     def max_approach(self) -> float:
-        """Largest allowed approach: ``h_s`` (free) or ``max h − mean h`` (periodic)."""
+        """The approach of a full sweep: ``h_s`` (free; larger approaches are allowed too) or
+        ``max h − mean h`` (periodic: full contact, the largest allowed)."""
         if self.boundary == "periodic":
             return self.h_max - float(self._h.mean())
         return self.h_range
 
     def _check_approach(self, approach: float) -> float:
         a = _validate.real("approach", approach, low=0.0, what="a finite number ≥ 0")
+        if self.boundary == "free":
+            # A free-boundary patch keeps gaining contact past h_s (about half of it is in
+            # contact at Δ = h_s); any approach is a well-posed problem.
+            return a
         limit = self.max_approach
         if a > limit * (1 + 1e-12) + 1e-300:
-            what = (
-                "full contact (max h − mean h)"
-                if self.boundary == "periodic"
-                else "h_s = max h − min h"
-            )
             raise InvalidArgumentError(
-                f"approach: {a:.6g} exceeds {what} = {limit:.6g}; "
-                "nothing more can be pressed into contact"
+                f"approach: {a:.6g} exceeds full contact (max h − mean h) = {limit:.6g} of a "
+                "periodic surface, where u has zero mean and the flat cannot move further; "
+                "give an approach ≤ that"
             )
         return min(a, limit)
 
     def solve(
         self,
-        approach: float,
+        approach: float | None = None,
         *,
-        solver: SolverName = "lawson-hanson",
+        mean_pressure: float | None = None,
+        solver: SolverName = "auto",
         warm_start: bool | ContactState | np.ndarray | None = None,
         tol: float | None = None,
         max_iter: int | None = None,
     ) -> ContactState:
-        """Solve the contact at imposed approach ``Δ`` (see the module docstring).
+        """Solve the contact at an imposed approach ``Δ`` or an imposed mean pressure ``p̄``.
 
-        ``solver``: ``"lawson-hanson"`` (the paper: one point enters the contact set per
-        iteration), ``"active-set"`` (Lawson–Hanson with blocks of points entering at once:
-        the same unique minimiser, far fewer factor updates), ``"polonsky-keer"``
-        (matrix-free conjugate gradients), ``"auto"``: Polonsky–Keer to find the contact set,
-        then an exact Lawson–Hanson finish from that set when its Cholesky factor fits in
-        half the memory limit (the result's ``solver`` reads
-        ``"polonsky-keer+active-set"``), else the Polonsky–Keer answer alone. With
-        ``warm_start=True`` it continues from the previous solve's factor instead.
+        Give exactly one of ``approach`` (displacement control, ``Δ ≥ 0`` [length]) and
+        ``mean_pressure`` (load control, ``p̄ = F/A0 > 0`` [pressure]; the approach is then an
+        output, the state's ``approach``).
 
-        ``warm_start``: ``None``/``False`` start from ``p = 0`` (the paper); ``True`` from the
-        contact set of this problem's previous solve; a :class:`ContactState` or a boolean
-        contact mask from that set.
+        ``solver`` (every one returns the same unique minimiser, checked by the KKT
+        certificate ``kkt ≤ tol``, default :data:`DEFAULT_TOL` relative to ``h_s``):
+
+        * ``"auto"`` (default): Polonsky–Keer, matrix-free and preconditioned, on grids of more
+          than :data:`AUTO_ACTIVE_SET_MAX_POINTS` points; the exact block active set on smaller
+          ones (displacement control), where its dense factor is cheaper. The state's
+          ``solver`` names the one that ran.
+        * ``"polonsky-keer"``: constrained conjugate gradients with the FFT operator.
+        * ``"active-set"``: Lawson–Hanson with blocks of points entering at once (exact to
+          round-off; dense Cholesky of the contact block, so O(k³) in the contact points k).
+        * ``"lawson-hanson"``: the paper's algorithm, one point enters per iteration.
+
+        ``warm_start``: ``None``/``False`` start cold (``p = 0``, the paper); ``True`` from
+        this problem's previous solve; a :class:`ContactState` from that state (Polonsky–Keer
+        starts from its pressure, the exact solvers from its contact set); a boolean contact
+        mask of the surface's shape (exact solvers: from that set; Polonsky–Keer: cold).
         """
-        a = self._check_approach(approach)
         _validate.choice("solver", solver, SOLVERS)
         tol = DEFAULT_TOL if tol is None else _validate.positive("tol", tol)
         max_iter = _validate.optional_integer("max_iter", max_iter, low=1)
+        if (approach is None) == (mean_pressure is None):
+            raise InvalidArgumentError(
+                "approach: give exactly one of approach= (displacement control) and "
+                "mean_pressure= (load control)",
+                argument="approach",
+            )
+        self._check_warm_start(warm_start)
+        if mean_pressure is not None:
+            pbar = _validate.positive("mean_pressure", mean_pressure)
+            if solver in ("active-set", "lawson-hanson"):
+                raise InvalidArgumentError(
+                    f"solver: {solver!r} imposes the approach only; use solver='auto' or "
+                    "'polonsky-keer' with mean_pressure=",
+                    argument="solver",
+                )
+            return self._solve_pk(None, pbar, warm_start, tol, max_iter)
+        a = self._check_approach(approach)
         if solver == "auto":
-            return self._solve_auto(a, warm_start, tol, max_iter)
+            solver = (
+                "active-set" if self._h.size <= AUTO_ACTIVE_SET_MAX_POINTS else "polonsky-keer"
+            )
         if solver == "polonsky-keer":
-            return self._solve_pk(a, warm_start, tol, max_iter)
+            return self._solve_pk(a, None, warm_start, tol, max_iter)
         start, contact_set = self._start(warm_start)
         out = self._core.solve_lawson_hanson(
             a,
@@ -297,27 +335,22 @@ class ContactProblem:
         self._last = state
         return state
 
-    def _solve_auto(
-        self, a: float, warm_start: Any, tol: float, max_iter: int | None
-    ) -> ContactState:
-        if warm_start is True and self._last is not None and self._core.n_passive > 0:
-            return self.solve(a, solver="active-set", warm_start=True, tol=tol, max_iter=max_iter)
-        if a == 0.0:
-            return self.solve(a, solver="active-set", tol=tol, max_iter=max_iter)
-        rough = self._solve_pk(a, warm_start, max(tol, 1e-9), max_iter)
-        k = int(np.count_nonzero(rough.contact))
-        full = k == rough.n_points
-        # Worst case of the growing factor: 1.5 × k rows, squared, 8 bytes each.
-        factor_bytes = 8 * (1.5 * k) ** 2
-        if full or factor_bytes > 0.5 * self.memory_limit:
-            return rough
-        exact = self.solve(
-            a, solver="active-set", warm_start=rough.contact, tol=tol, max_iter=max_iter
-        )
-        exact.solver = "polonsky-keer+active-set"
-        exact.iterations += rough.iterations
-        exact.seconds += rough.seconds
-        return exact
+    def _check_warm_start(self, warm_start: Any) -> None:
+        if warm_start is None or isinstance(warm_start, (bool, np.bool_, ContactState)):
+            if isinstance(warm_start, ContactState) and warm_start.shape != self._h.shape:
+                raise InvalidArgumentError(
+                    f"warm_start: a state of shape {warm_start.shape}, the surface is "
+                    f"{self._h.shape}; pass a state of this surface",
+                    argument="warm_start",
+                )
+            return
+        mask = np.asarray(warm_start)
+        if mask.shape != self._h.shape or mask.dtype != bool:
+            raise InvalidArgumentError(
+                "warm_start: expected True/False, a ContactState or a boolean contact mask of "
+                f"shape {self._h.shape}",
+                argument="warm_start",
+            )
 
     def _start(self, warm_start: Any) -> tuple[str, np.ndarray | None]:
         if warm_start is None or warm_start is False:
@@ -325,17 +358,16 @@ class ContactProblem:
         if warm_start is True:
             return "previous", None
         mask = warm_start.contact if isinstance(warm_start, ContactState) else warm_start
-        mask = np.asarray(mask)
-        if mask.shape != self._h.shape or mask.dtype != bool:
-            raise ValueError(
-                "warm_start: expected True/False, a ContactState or a boolean contact mask of "
-                f"shape {self._h.shape}"
-            )
-        return "set", np.flatnonzero(mask).astype(np.int64)
+        return "set", np.flatnonzero(np.asarray(mask)).astype(np.int64)
 
-    def _solve_pk(self, a: float, warm_start: Any, tol: float, max_iter: int | None):
-        if not hasattr(_core, "solve_polonsky_keer"):  # pragma: no cover
-            raise ValueError("solver: polonsky-keer is not available in this build")
+    def _solve_pk(
+        self,
+        a: float | None,
+        mean_pressure: float | None,
+        warm_start: Any,
+        tol: float,
+        max_iter: int | None,
+    ) -> ContactState:
         init = None
         if warm_start is True and self._last is not None:
             init = self._last.pressure
@@ -347,10 +379,12 @@ class ContactProblem:
             self.e_star,
             self.boundary,
             approach=a,
+            mean_pressure=mean_pressure,
             tol=tol,
             max_iter=max_iter,
             initial_pressure=init,
             memory_limit=self.memory_limit,
+            operator_of=self._core,
         )
         state = self._state(out, "polonsky-keer")
         self._last = state
@@ -375,19 +409,21 @@ class ContactProblem:
 
 def solve(
     surface: Surface | np.ndarray,
-    approach: float,
+    approach: float | None = None,
     *,
+    mean_pressure: float | None = None,
     E: float = 1.0,
     nu: float = 0.0,
     boundary: Boundary = "free",
-    solver: SolverName = "lawson-hanson",
+    solver: SolverName = "auto",
     warm_start: bool | ContactState | np.ndarray | None = None,
     tol: float | None = None,
     max_iter: int | None = None,
     dx: float | None = None,
     memory_limit: int | None = None,
 ) -> ContactState:
-    """Solve the contact of ``surface`` with a rigid flat at imposed approach ``approach``.
+    """Solve the contact of ``surface`` with a rigid flat at an imposed approach, or at an
+    imposed ``mean_pressure`` (load control).
 
     See :class:`ContactProblem` and :meth:`ContactProblem.solve`. ``warm_start=True`` has no
     previous solve to start from here; pass a :class:`ContactState` or a contact mask.
@@ -397,6 +433,7 @@ def solve(
     )
     return problem.solve(
         approach,
+        mean_pressure=mean_pressure,
         solver=solver,
         warm_start=None if warm_start is True else warm_start,
         tol=tol,
