@@ -37,6 +37,7 @@ use faer::linalg::triangular_solve::{
 use faer::{Accum, Mat, MatMut, MatRef, Par};
 use rayon::prelude::*;
 
+use crate::alloc;
 use crate::error::{Error, Result};
 use crate::influence::Kernel;
 use crate::operator::Operator;
@@ -89,17 +90,25 @@ struct Tail {
 }
 
 impl Factor {
-    pub fn new(n_points: usize, memory_limit: u64) -> Self {
-        Factor {
+    /// An empty factor for a grid of `n_points`; `Error::TooLarge` when its index map cannot
+    /// be allocated.
+    pub fn try_new(n_points: usize, memory_limit: u64) -> Result<Self> {
+        Ok(Factor {
             cap: 0,
             l: Vec::new(),
             idx: Vec::new(),
-            pos: vec![NOT_IN_P; n_points],
+            pos: alloc::try_filled(n_points, NOT_IN_P, "the contact-set index map")?,
             memory_limit,
             tail: None,
             fwd: Vec::new(),
             fwd_ok: 0,
-        }
+        })
+    }
+
+    /// [`Factor::try_new`] for tests, where the sizes are small.
+    #[cfg(test)]
+    pub fn new(n_points: usize, memory_limit: u64) -> Self {
+        Self::try_new(n_points, memory_limit).expect("test grids are small")
     }
 
     /// Forget the cached forward solve (the right-hand side changed).
@@ -136,15 +145,21 @@ impl Factor {
             return Ok(());
         }
         let grown = (self.cap + self.cap / 2).max(k).max(64).min(k_bound.max(k));
+        // While growing, the old factor is copied into the new one: both are held at once.
         let need = Self::bytes_for(grown) + Self::bytes_for(self.cap);
+        let what = format!(
+            "growing the Cholesky factor of the contact block to {grown} rows for {k} contact \
+             points (a {grown}² new factor while the {}² old one is copied into it)",
+            self.cap
+        );
         if need > self.memory_limit {
             return Err(Error::TooLarge {
-                bytes: Self::bytes_for(k),
+                bytes: need,
                 limit: self.memory_limit,
-                what: format!("the Cholesky factor of a {k}-point contact block"),
+                what,
             });
         }
-        let mut l = vec![0.0; grown * grown];
+        let mut l: Vec<f64> = alloc::try_zeroed(grown * grown, &what)?;
         let (old_cap, old_k) = (self.cap, self.idx.len());
         l.par_chunks_mut(grown)
             .take(old_k)
@@ -175,7 +190,7 @@ impl Factor {
             return Ok(());
         }
         self.reserve(k + nb, k_bound)?;
-        let mut r = kernel.cross_block(&self.idx, new);
+        let mut r = kernel.cross_block(&self.idx, new)?;
         if k > 0 {
             let rm = MatMut::from_column_major_slice_mut(&mut r, k, nb);
             solve_lower_triangular_in_place(self.lower(k), rm, par_for(k * nb));
@@ -543,8 +558,8 @@ impl<'a> LawsonHanson<'a> {
             crate::operator::Boundary::Free => b.iter().filter(|&&v| v >= 0.0).count(),
             crate::operator::Boundary::Periodic => n,
         };
-        let mut p = vec![0.0; n];
-        let mut u = vec![0.0; n];
+        let mut p: Vec<f64> = alloc::try_zeroed(n, "the pressure field")?;
+        let mut u: Vec<f64> = alloc::try_zeroed(n, "the displacement field")?;
         let mut iterations = 0usize;
         self.factor.new_rhs();
         match start {
@@ -809,7 +824,7 @@ mod tests {
     /// `C_PP⁻¹ b_P` by a fresh dense Cholesky of the block built directly from the kernel.
     fn dense_solve(ker: &Kernel, idx: &[usize], b: &[f64]) -> Vec<f64> {
         let k = idx.len();
-        let c = ker.block(idx);
+        let c = ker.block(idx).unwrap();
         let cm = Mat::<f64>::from_fn(k, k, |a, bb| c[a + k * bb]);
         let rhs = Mat::<f64>::from_fn(k, 1, |a, _| b[idx[a]]);
         let x = faer::linalg::solvers::Solve::solve(&cm.llt(faer::Side::Lower).unwrap(), &rhs);
@@ -889,7 +904,7 @@ mod tests {
         f.new_rhs();
         f.solve_rhs(&b, &mut x);
         // Residual against the block built directly.
-        let c = ker.block(&f.idx);
+        let c = ker.block(&f.idx).unwrap();
         let k = f.len();
         for r in 0..k {
             let s: f64 = (0..k).map(|cc| c[r + k * cc] * x[cc]).sum();

@@ -101,6 +101,7 @@ use std::time::{Duration, Instant};
 
 use rayon::prelude::*;
 
+use crate::alloc;
 use crate::error::{Error, Result};
 use crate::influence::{love_displacement, Kernel};
 use crate::operator::{check_shape, padded, Boundary, Operator};
@@ -233,15 +234,16 @@ pub fn memory_estimate(ny: usize, nx: usize, boundary: Boundary) -> u64 {
     let spec = py.saturating_mul(pxh).saturating_mul(8);
     let apply = (ny as u64).saturating_mul(pxh).saturating_mul(16);
     let build = match boundary {
-        // Kernel table, then the padded real kernel and its half spectrum together, then the
-        // half spectrum with the spectrum.
+        // Kernel table and the operator's apply buffer, then the padded real kernel and its
+        // half spectrum together, then the half spectrum with the spectrum.
         Boundary::Free => {
             let padded_kernel = py.saturating_mul(px).saturating_mul(8);
             let half = py.saturating_mul(pxh).saturating_mul(16);
             n.saturating_mul(8)
+                .saturating_add(apply)
                 .saturating_add(half.saturating_add(padded_kernel.max(spec)))
         }
-        Boundary::Periodic => spec,
+        Boundary::Periodic => spec.saturating_add(apply),
     };
     let iterate = spec
         .saturating_add(apply)
@@ -285,8 +287,10 @@ pub fn solve(problem: &Problem, control: Control, opts: &Options) -> Result<Solu
         }
     }
     let op = match problem.boundary {
-        Boundary::Free => Operator::free(&Kernel::new(ny, nx, problem.dx, problem.e_star)),
-        Boundary::Periodic => Operator::periodic(ny, nx, problem.dx, problem.e_star),
+        Boundary::Free => {
+            Operator::try_free(&Kernel::try_new(ny, nx, problem.dx, problem.e_star)?)?
+        }
+        Boundary::Periodic => Operator::try_periodic(ny, nx, problem.dx, problem.e_star)?,
     };
     run(&op, problem, control, opts)
 }
@@ -1088,14 +1092,22 @@ fn run(op: &Operator, problem: &Problem, control: Control, opts: &Options) -> Re
         op,
         h,
         hmax,
-        p: vec![0.0; n],
-        u: if u_in_r { Vec::new() } else { vec![0.0; n] },
+        p: alloc::try_zeroed(n, "the pressure field")?,
+        u: if u_in_r {
+            Vec::new()
+        } else {
+            alloc::try_zeroed(n, "the displacement field")?
+        },
         u_in_r,
-        g: vec![0.0; n],
-        t: vec![0.0; n],
-        r: vec![0.0; n],
+        g: alloc::try_zeroed(n, "the gap field")?,
+        t: alloc::try_zeroed(n, "the conjugate direction")?,
+        r: alloc::try_zeroed(n, "the operator work field")?,
         table: Vec::new(),
-        slots: vec![(0, 0.0); n_chunks * SPARSE_MAX],
+        slots: alloc::try_filled(
+            n_chunks * SPARSE_MAX,
+            (0, 0.0),
+            "the sparse-correction slots",
+        )?,
         changes: Vec::with_capacity(SPARSE_MAX),
         ny,
         nx,

@@ -15,7 +15,6 @@ at ``Δ = max h − mean h`` and a larger approach is an error.
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass, field
 from functools import cached_property
 from typing import TYPE_CHECKING, Any, Literal
@@ -37,12 +36,12 @@ DEFAULT_TOL = 1e-11
 
 
 def default_memory_limit() -> int:
-    """Bytes leakpath may use for one solve: 70 % of physical memory."""
-    try:
-        total = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
-    except (ValueError, OSError, AttributeError):  # pragma: no cover - non-POSIX
-        total = 8 << 30
-    return int(0.7 * total)
+    """Bytes leakpath may use for one solve: what this process may still allocate (the least
+    of the cgroup and ulimit headroom and the available memory) times a safety fraction; see
+    :func:`leakpath._memory.memory_limit`."""
+    from ._memory import memory_limit
+
+    return memory_limit()
 
 
 def contact_modulus(E: float, nu: float) -> float:
