@@ -190,6 +190,21 @@ impl Factor {
             return Ok(());
         }
         self.reserve(k + nb, k_bound)?;
+        // Working set of the update besides the factor: R (k × nb), S and its kept copy
+        // (nb × nb each) and the Cholesky scratch (about one more nb × nb).
+        let work = 8 * (k as u64 * nb as u64 + 3 * nb as u64 * nb as u64);
+        let need = Self::bytes_for(self.cap).saturating_add(work);
+        if need > self.memory_limit {
+            return Err(Error::TooLarge {
+                bytes: need,
+                limit: self.memory_limit,
+                what: format!(
+                    "adding {nb} points to the Cholesky factor of a {k}-point contact block \
+                     (the {}² factor and the update's {k} × {nb} and {nb} × {nb} blocks)",
+                    self.cap
+                ),
+            });
+        }
         let mut r = kernel.cross_block(&self.idx, new)?;
         if k > 0 {
             let rm = MatMut::from_column_major_slice_mut(&mut r, k, nb);

@@ -7,6 +7,10 @@ leakpath refuses a problem before allocating it when its estimated size exceeds 
                  RLIMIT_AS − current address space,        (``ulimit -v``)
                  RLIMIT_DATA − current data segment,       (``ulimit -d``)
                  MemAvailable)                             (/proc/meminfo)
+    − THREAD_RESERVE × (CPUs + 1)
+
+``THREAD_RESERVE`` is the packing buffer the dense linear algebra allocates once per thread
+(64 MiB), which no estimate of a problem's size includes.
 
 Each term that does not apply (no cgroup limit, unlimited rlimit, not Linux) is left out;
 without any, 70 % of physical memory. The limit is computed at each call, so it follows what
@@ -19,11 +23,14 @@ import os
 import resource
 from pathlib import Path
 
-__all__ = ["SAFETY", "memory_limit", "memory_headroom"]
+__all__ = ["SAFETY", "THREAD_RESERVE", "memory_limit", "memory_headroom"]
 
 #: Fraction of the headroom a single problem may take: the estimates leave out small buffers,
 #: and the rest of the program (and numpy's copies of the results) needs room too.
 SAFETY = 0.8
+
+#: Bytes each computing thread may allocate besides the problem's own buffers.
+THREAD_RESERVE = 64 << 20
 
 _UNLIMITED = 1 << 62
 
@@ -142,8 +149,12 @@ def memory_headroom() -> dict[str, int]:
 
 
 def memory_limit() -> int:
-    """Default ``memory_limit`` in bytes: ``SAFETY`` × the smallest headroom (see the module)."""
+    """Default ``memory_limit`` in bytes: ``SAFETY`` × the smallest headroom, less the
+    per-thread reserve (see the module); at least 1 byte, so that any problem is refused."""
     terms = memory_headroom()
-    if not terms:
-        return int(0.7 * _physical())
-    return int(SAFETY * min(terms.values()))
+    room = int(0.7 * _physical()) if not terms else int(SAFETY * min(terms.values()))
+    return max(room - _thread_reserve(), 1)
+
+
+def _thread_reserve() -> int:
+    return THREAD_RESERVE * ((os.cpu_count() or 1) + 1)
