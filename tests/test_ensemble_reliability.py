@@ -72,9 +72,9 @@ def test_killed_driver_under_a_piping_parent_leaves_nothing_alive(tmp_path: Path
     every worker, the fork server and the resource tracker must be gone within 3 s."""
     code = """
 from leakpath.ensemble import ensemble
-ensemble(params={"m": 5, "D": 2.2}, surfaces=8, levels=6, out=%r, workers=2,
+ensemble(params={{"m": 5, "D": 2.2}}, surfaces=8, levels=6, out={!r}, workers=2,
          progress=False, figures=False)
-""" % str(tmp_path / "run")
+""".format(str(tmp_path / "run"))
     env = dict(os.environ, LEAKPATH_TEST_STOP_AFTER="1")
     proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, env=env, start_new_session=True)
