@@ -564,7 +564,8 @@ impl<'a> LawsonHanson<'a> {
                 format!("must be ≥ 0, got {approach}"),
             ));
         }
-        let b: Vec<f64> = self.h.iter().map(|&hi| approach - (hmax - hi)).collect();
+        let mut b: Vec<f64> = alloc::try_with_capacity(n, "the right-hand side")?;
+        b.extend(self.h.iter().map(|&hi| approach - (hmax - hi)));
         let scale = if hs > 0.0 { hs } else { 1.0 };
         let tol_abs = opts.tol * scale;
         // Contact needs u_i = b_i ≥ 0 (free boundary: u ≥ 0), so the passive set never
@@ -608,7 +609,7 @@ impl<'a> LawsonHanson<'a> {
             iterations += 1;
         }
 
-        let mut skip = vec![false; n];
+        let mut skip: Vec<bool> = alloc::try_zeroed(n, "the skipped-point marks")?;
         let mut skipped: Vec<usize> = Vec::new();
         let mut z: Vec<f64> = Vec::new();
         loop {
@@ -745,7 +746,8 @@ impl<'a> LawsonHanson<'a> {
             }
         }
         // The loop ended right after computing u = C p for the final p.
-        let gap: Vec<f64> = (0..n).map(|i| u[i] - b[i]).collect();
+        let mut gap: Vec<f64> = alloc::try_with_capacity(n, "the gap field")?;
+        gap.extend((0..n).map(|i| u[i] - b[i]));
         let kkt = kkt_certificate(&p, &gap, scale);
         let n_contact = p.iter().filter(|&&v| v > 0.0).count();
         Ok(Solution {

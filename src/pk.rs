@@ -867,7 +867,9 @@ impl Work<'_> {
         if self.table.is_empty() {
             self.r.fill(0.0);
             self.r[0] = 1.0;
-            let mut table = vec![0.0; self.r.len()];
+            // Its capacity was reserved (fallibly) with the other work arrays.
+            let mut table = std::mem::take(&mut self.table);
+            table.resize(self.r.len(), 0.0);
             self.op.apply(&self.r, &mut table);
             self.applies += 1;
             self.table = table;
@@ -1102,7 +1104,7 @@ fn run(op: &Operator, problem: &Problem, control: Control, opts: &Options) -> Re
         g: alloc::try_zeroed(n, "the gap field")?,
         t: alloc::try_zeroed(n, "the conjugate direction")?,
         r: alloc::try_zeroed(n, "the operator work field")?,
-        table: Vec::new(),
+        table: alloc::try_with_capacity(n, "the influence table")?,
         slots: alloc::try_filled(
             n_chunks * SPARSE_MAX,
             (0, 0.0),

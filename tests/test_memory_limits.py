@@ -110,14 +110,15 @@ def test_large_problem_is_refused_under_an_address_space_cap() -> None:
 
 @posix_only
 def test_failed_allocation_raises_instead_of_aborting() -> None:
-    """With the limit lifted, the allocation itself fails under the cap: still a refusal."""
-    proc = _run_capped(
-        REFUSE.format(
-            call="leakpath.ContactProblem(leakpath.Surface(np.ones((8193, 8193)), 1.0), "
-            "memory_limit=1 << 50)"
-        ),
-        cap=6 * GIB,
-    )
+    """With the limit lifted, the allocation itself fails under the cap: still a refusal.
+
+    The cap leaves room for the problem's copy of the heights (537 MB) but not for its
+    kernel table as well, so the failure comes early and the test stays fast."""
+    code = """
+s = leakpath.Surface(np.ones((8193, 8193)), 1.0)
+resource.setrlimit(resource.RLIMIT_AS, (_vm() + (800 << 20), resource.RLIM_INFINITY))
+""" + REFUSE.format(call="leakpath.ContactProblem(s, memory_limit=1 << 50)")
+    proc = _run_capped(code, cap=6 * GIB)
     _assert_refused(proc)
     assert "the system refused to allocate it" in proc.stdout
 
