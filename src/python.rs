@@ -247,8 +247,8 @@ fn kernel_table<'py>(
     if bytes > limit {
         return Err(to_py(Error::TooLarge { bytes, limit, what }));
     }
-    let table =
-        interruptible(py, |_| influence::try_kernel_table(ny, nx, dx, e_star))?.map_err(to_py)?;
+    let table = interruptible_owned(py, move |_| influence::try_kernel_table(ny, nx, dx, e_star))?
+        .map_err(to_py)?;
     let arr = numpy::PyArray1::from_vec(py, table);
     arr.reshape([ny, nx])
 }
@@ -344,7 +344,16 @@ mod clusters_py {
     fn zeros_u32(py: Python<'_>, ny: usize, nx: usize) -> PyResult<Bound<'_, PyArray2<u32>>> {
         let arr = py
             .import("numpy")?
-            .call_method1("zeros", ((ny, nx), "uint32"))?;
+            .call_method1("zeros", ((ny, nx), "uint32"))
+            .map_err(|e| {
+                if e.is_instance_of::<pyo3::exceptions::PyMemoryError>(py) {
+                    let what = format!("the cluster labels of a {ny} × {nx} grid");
+                    let bytes = (ny as u64).saturating_mul(nx as u64).saturating_mul(4);
+                    to_py(crate::alloc::refused(bytes, &what))
+                } else {
+                    e
+                }
+            })?;
         Ok(arr.cast_into::<PyArray2<u32>>()?)
     }
 
@@ -580,7 +589,9 @@ mod contact_py {
                 }));
             }
             let (h, ny, nx) = heights_vec(&heights)?;
-            let built = super::interruptible(py, |_| -> Result<_, Error> {
+            // Building the kernel and the operator of a large grid takes seconds and cannot
+            // stop half-way: the owned variant lets Ctrl-C return at once.
+            let built = super::interruptible_owned(py, move |_| -> Result<_, Error> {
                 Ok(match bc {
                     Boundary::Free => {
                         let kernel = Kernel::try_new(ny, nx, dx, e_star)?;
@@ -778,6 +789,7 @@ mod pk_py {
     use pyo3::types::PyDict;
 
     use super::to_py;
+    use crate::alloc;
     use crate::error::Error;
     use crate::operator::Boundary;
     use crate::pk::{self, Control, Options, Problem};
@@ -853,31 +865,53 @@ mod pk_py {
                 ));
             }
         }
-        let h = row_major(&heights);
-        let h: &[f64] = &h;
-        let p0 = initial_pressure.as_ref().map(row_major);
-        let p0: Option<&[f64]> = p0.as_deref();
-        let problem = Problem {
-            heights: h,
-            ny,
-            nx,
-            dx,
-            e_star,
-            boundary,
-        };
         let tol = tol.unwrap_or(pk::DEFAULT_TOL);
         let memory_limit = match memory_limit {
             Some(l) => l,
             None => super::default_memory_limit(py)?,
         };
+        // Refuse before copying anything (the estimate includes the copy of the heights).
+        let need = pk::memory_estimate(ny, nx, boundary);
+        if need > memory_limit {
+            let kind = match boundary {
+                Boundary::Free => "free",
+                Boundary::Periodic => "periodic",
+            };
+            return Err(to_py(Error::TooLarge {
+                bytes: need,
+                limit: memory_limit,
+                what: format!("Polonsky–Keer on a {ny} × {nx} {kind} grid"),
+            }));
+        }
+        // The solve owns its inputs, so that Ctrl-C can return while the operator of a large
+        // grid is still being built (see `interruptible_owned`).
+        let owned = |a: &PyReadonlyArray2<'_, f64>, what: &str| -> PyResult<Vec<f64>> {
+            let src = row_major(a);
+            let mut v = alloc::try_with_capacity(src.len(), what).map_err(to_py)?;
+            v.extend_from_slice(&src);
+            Ok(v)
+        };
+        let h = owned(&heights, "a copy of the heights")?;
+        let p0 = match &initial_pressure {
+            Some(a) => Some(owned(a, "a copy of the initial pressure")?),
+            None => None,
+        };
         let start = Instant::now();
-        let outcome = super::interruptible(py, |stop| {
+        let outcome = super::interruptible_owned(py, move |stop| {
+            let problem = Problem {
+                heights: &h,
+                ny,
+                nx,
+                dx,
+                e_star,
+                boundary,
+            };
             // Ctrl-C: the solver polls this flag between iterations (see `interruptible`).
             let should_stop = super::stop_flag(stop);
             let opts = Options {
                 tol,
                 max_iter,
-                initial_pressure: p0,
+                initial_pressure: p0.as_deref(),
                 memory_limit: Some(memory_limit),
                 should_stop: Some(&should_stop),
             };

@@ -1613,6 +1613,9 @@ def ensemble(
         raise ValueError(f"boundary: must be 'free' or 'periodic', got {boundary!r}")
     # The elastic constants are used only inside the tasks: check them here, before any
     # worker starts or any file is written.
+    for name, value in (("E", E), ("nu", nu)):
+        if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
+            raise ValueError(f"{name}: must be a number, got {value!r}")
     contact_modulus(E, nu)
     retries = _check_int("retries", retries, 0)
     if workers is not None:
