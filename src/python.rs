@@ -165,18 +165,16 @@ fn interruptible_owned<T: Send + 'static>(
                         "internal error: a worker thread vanished",
                     ))
                 }
-                Err(RecvTimeoutError::Timeout) => match &raised {
+                Err(RecvTimeoutError::Timeout) => match raised.take() {
                     None => {
                         if let Err(e) = Python::attach(|py| py.check_signals()) {
                             stop.store(true, Ordering::Relaxed);
                             raised = Some((e, Instant::now()));
                         }
                     }
-                    Some((_, at)) if at.elapsed() >= STOP_GRACE => {
-                        // Detach the worker (dropping its handle): it stops at its next poll.
-                        return Err(raised.take().map(|(e, _)| e).expect("checked above"));
-                    }
-                    Some(_) => {}
+                    // Detach the worker (dropping its handle): it stops at its next poll.
+                    Some((e, at)) if at.elapsed() >= STOP_GRACE => return Err(e),
+                    kept => raised = kept,
                 },
             }
         }

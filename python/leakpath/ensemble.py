@@ -82,7 +82,12 @@ parallel, so one single-threaded task per core is also the most efficient layout
 (``BrokenProcessPool``) loses only the unfinished tasks: they are resubmitted on a fresh
 pool; after ``retries + 1`` consecutive broken pools without a finished task the run stops
 with ``RuntimeError``. If the driver itself dies (SIGKILL, out of memory), a watchdog thread
-in each worker (POSIX) ends it within a second instead of leaving it orphaned.
+in each worker sees the end-of-file of a pipe whose write end only the driver held and ends
+the worker at once instead of leaving it orphaned. Workers, the fork server and the resource
+tracker do not hold the driver's standard output and error (they point at ``/dev/null``), so
+a caller reading the driver's output through a pipe is not kept waiting by them. The workers
+never run the calling program again: it may be a script (guarded or not), ``python -c`` or
+``python -`` (a generator defined in a script needs the usual ``__main__`` guard).
 
 ``executor=<dask.distributed.Client>`` or a scheduler address (``"tcp://host:8786"``; a
 Client is created and closed here): the same task function is submitted with
