@@ -149,7 +149,8 @@ impl Factor {
         let need = Self::bytes_for(grown) + Self::bytes_for(self.cap);
         let what = format!(
             "growing the Cholesky factor of the contact block to {grown} rows for {k} contact \
-             points (a {grown}² new factor while the {}² old one is copied into it)",
+             points (a {grown}² new factor while the {}² old one is copied into it; \
+             solver='polonsky-keer' needs no factor)",
             self.cap
         );
         if need > self.memory_limit {
