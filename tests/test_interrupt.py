@@ -129,3 +129,28 @@ def test_sigint_stops_the_cli(tmp_path) -> None:
     assert proc.returncode == 130, (out, err)
     assert "interrupted" in err
     assert exited < LATENCY + EXIT_SLACK
+
+
+def test_interrupted_problem_can_be_solved_again() -> None:
+    """After Ctrl-C in the middle of a long solve the same ContactProblem still solves, from
+    p = 0, and gives the numbers of a fresh problem."""
+    import threading
+
+    import numpy as np
+
+    import leakpath
+
+    s = leakpath.rmd(9, 2.2, seed=1)
+    prob = leakpath.ContactProblem(s)
+    timer = threading.Timer(0.5, os.kill, args=(os.getpid(), signal.SIGINT))
+    timer.start()
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            prob.solve(0.5 * s.height_range, solver="active-set")
+    finally:
+        timer.cancel()
+    a = 0.02 * s.height_range
+    again = prob.solve(a, solver="active-set", warm_start=True)
+    fresh = leakpath.ContactProblem(s).solve(a, solver="active-set")
+    assert np.array_equal(again.pressure, fresh.pressure)
+    assert np.array_equal(again.gap, fresh.gap)
