@@ -89,6 +89,10 @@ CASES = {
         "s = leakpath.rmd(9, 2.2, seed=1)",
         "leakpath.percolation_threshold(s, solver='active-set')",
     ),
+    "percolation_threshold-auto": (
+        "s = leakpath.rmd(9, 2.2, seed=1)",
+        "leakpath.percolation_threshold(s)",
+    ),
 }
 
 
