@@ -52,6 +52,7 @@ use std::sync::Mutex;
 
 use rayon::prelude::*;
 
+use crate::alloc;
 use crate::error::{Error, Result};
 
 /// Touch flag: the cluster has a cell in row 0.
@@ -1223,6 +1224,7 @@ fn run_with<F: FreeCells>(
     // source (which may be the gap field, 64 bits per cell) again.
     // Every word is written before it is read: stale content does not matter.
     let bits = &mut grid.bits;
+    alloc::try_reserve_total(bits, ny * nw, "the free-cell bit mask")?;
     bits.resize(ny * nw, 0);
 
     let strips: Vec<Strip> = labels
@@ -1249,6 +1251,9 @@ fn run_with<F: FreeCells>(
     // Join the strips along their seams, and the last row to the first with axis-0 wrap.
     let gparent = &mut grid.parent;
     gparent.clear();
+    alloc::try_reserve_total(gparent, total, "the union-find forest of the clusters")?;
+    alloc::try_reserve_total(&mut grid.cluster, total, "the cluster numbers")?;
+    alloc::try_reserve_total(&mut grid.rank, total, "the cluster ranks")?;
     gparent.extend(0..total as u32);
     let (mut above, mut below) = (RowBits::default(), RowBits::default());
     let region = |s: usize| &labels[s * chunk..((s + 1) * chunk).min(labels.len())];

@@ -6,7 +6,9 @@ use std::fmt;
 pub enum Error {
     /// An argument is out of its domain; `name` is the argument as the Python API spells it.
     InvalidArgument { name: &'static str, message: String },
-    /// The problem would need more memory than allowed; `bytes` is the estimate.
+    /// The problem would need more memory than allowed; `bytes` is the estimate. `limit` 0:
+    /// no configured limit was exceeded but the allocator refused; `bytes` `u64::MAX`: the
+    /// size overflows.
     TooLarge {
         bytes: u64,
         limit: u64,
@@ -35,12 +37,34 @@ impl fmt::Display for Error {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             Error::InvalidArgument { name, message } => write!(f, "{name}: {message}"),
-            Error::TooLarge { bytes, limit, what } => write!(
-                f,
-                "{what} needs about {:.2} GiB, more than the {:.2} GiB allowed",
-                *bytes as f64 / (1u64 << 30) as f64,
-                *limit as f64 / (1u64 << 30) as f64
-            ),
+            Error::TooLarge { bytes, limit, what } => {
+                let gib = |b: u64| b as f64 / (1u64 << 30) as f64;
+                if *bytes == u64::MAX {
+                    write!(
+                        f,
+                        "{what} cannot be allocated on any machine; use a smaller grid"
+                    )
+                } else if *limit == 0 {
+                    write!(
+                        f,
+                        "{what} needs {:.2} GiB and the system refused to allocate it (memory \
+                         in use, an address-space ulimit or a container memory limit); use a \
+                         smaller grid or free memory",
+                        gib(*bytes)
+                    )
+                } else {
+                    write!(
+                        f,
+                        "{what} needs about {:.2} GiB, more than the memory limit of {:.2} GiB \
+                         (memory_limit, by default what this process may still allocate: the \
+                         least of the cgroup and ulimit headroom and the available memory, \
+                         times a safety fraction); use a smaller grid or pass a larger \
+                         memory_limit",
+                        gib(*bytes),
+                        gib(*limit)
+                    )
+                }
+            }
             Error::NotConverged {
                 iterations,
                 residual,

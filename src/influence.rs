@@ -19,6 +19,9 @@
 
 use rayon::prelude::*;
 
+use crate::alloc;
+use crate::error::Result;
+
 /// `X asinh(Y/|X|) + Y asinh(X/|Y|)`, with `0·asinh(·/0) = 0`.
 #[inline]
 fn corner(x: f64, y: f64) -> f64 {
@@ -44,8 +47,10 @@ pub fn love_displacement(x: f64, y: f64, dx: f64, e_star: f64) -> f64 {
 
 /// The kernel table `K[|di|, |dj|]`, row-major `ny × nx`: displacement at a centre `di` rows and
 /// `dj` columns away from a unit-pressure element.
-pub fn kernel_table(ny: usize, nx: usize, dx: f64, e_star: f64) -> Vec<f64> {
-    let mut k = vec![0.0; ny * nx];
+/// Refused with [`Error::TooLarge`] when the table cannot be allocated.
+pub fn try_kernel_table(ny: usize, nx: usize, dx: f64, e_star: f64) -> Result<Vec<f64>> {
+    let n = alloc::checked_cells(ny, nx, "the kernel table")?;
+    let mut k: Vec<f64> = alloc::try_zeroed(n, &format!("the {ny} × {nx} kernel table"))?;
     k.par_chunks_mut(nx.max(1))
         .enumerate()
         .for_each(|(i, row)| {
@@ -56,7 +61,13 @@ pub fn kernel_table(ny: usize, nx: usize, dx: f64, e_star: f64) -> Vec<f64> {
                 *v = love_displacement(j as f64 * dx, y, dx, e_star);
             }
         });
-    k
+    Ok(k)
+}
+
+/// [`try_kernel_table`] for tests, where the sizes are small.
+#[cfg(test)]
+pub fn kernel_table(ny: usize, nx: usize, dx: f64, e_star: f64) -> Vec<f64> {
+    try_kernel_table(ny, nx, dx, e_star).expect("test kernel tables are small")
 }
 
 /// The kernel table with a given shape and element size.
@@ -70,14 +81,21 @@ pub struct Kernel {
 }
 
 impl Kernel {
-    pub fn new(ny: usize, nx: usize, dx: f64, e_star: f64) -> Self {
-        Kernel {
+    /// The Love kernel, refused with [`Error::TooLarge`] when its table cannot be allocated.
+    pub fn try_new(ny: usize, nx: usize, dx: f64, e_star: f64) -> Result<Self> {
+        Ok(Kernel {
             ny,
             nx,
             dx,
             e_star,
-            table: kernel_table(ny, nx, dx, e_star),
-        }
+            table: try_kernel_table(ny, nx, dx, e_star)?,
+        })
+    }
+
+    /// [`Kernel::try_new`] for tests, where the sizes are small.
+    #[cfg(test)]
+    pub fn new(ny: usize, nx: usize, dx: f64, e_star: f64) -> Self {
+        Self::try_new(ny, nx, dx, e_star).expect("test kernels are small")
     }
 
     /// A kernel from a given table, e.g. the periodic one: the first column of the circulant
@@ -113,14 +131,17 @@ impl Kernel {
     }
 
     /// The dense block `C_PP` for the flat indices `idx`, column-major `k × k`.
-    pub fn block(&self, idx: &[usize]) -> Vec<f64> {
+    pub fn block(&self, idx: &[usize]) -> Result<Vec<f64>> {
         self.cross_block(idx, idx)
     }
 
-    /// The block `C_{rows, cols}`, column-major `rows.len() × cols.len()`.
-    pub fn cross_block(&self, rows: &[usize], cols: &[usize]) -> Vec<f64> {
+    /// The block `C_{rows, cols}`, column-major `rows.len() × cols.len()`; refused with
+    /// [`crate::Error::TooLarge`] when it cannot be allocated.
+    pub fn cross_block(&self, rows: &[usize], cols: &[usize]) -> Result<Vec<f64>> {
         let m = rows.len();
-        let mut out = vec![0.0; m * cols.len()];
+        let what = || format!("a {m} × {} block of influence coefficients", cols.len());
+        let len = alloc::checked_cells(m, cols.len(), &what())?;
+        let mut out: Vec<f64> = alloc::try_zeroed(len, &what())?;
         let rc = self.coords(rows);
         let fill_col = |(c, col): (usize, &mut [f64])| {
             let cc = (cols[c] / self.nx, cols[c] % self.nx);
@@ -134,7 +155,7 @@ impl Kernel {
         } else {
             out.par_chunks_mut(m.max(1)).enumerate().for_each(fill_col);
         }
-        out
+        Ok(out)
     }
 }
 
@@ -187,7 +208,7 @@ mod tests {
     fn block_is_symmetric() {
         let ker = Kernel::new(7, 9, 1.0, 1.0);
         let idx = [0usize, 5, 17, 40, 62];
-        let b = ker.block(&idx);
+        let b = ker.block(&idx).unwrap();
         for r in 0..5 {
             for c in 0..5 {
                 assert_eq!(b[r + 5 * c], b[c + 5 * r]);

@@ -3,6 +3,7 @@
 //!
 //! Pure Rust; the PyO3 bindings live in `python.rs` only.
 
+pub mod alloc;
 pub mod clusters;
 pub mod error;
 pub mod influence;

@@ -37,6 +37,7 @@ use faer::linalg::triangular_solve::{
 use faer::{Accum, Mat, MatMut, MatRef, Par};
 use rayon::prelude::*;
 
+use crate::alloc;
 use crate::error::{Error, Result};
 use crate::influence::Kernel;
 use crate::operator::Operator;
@@ -89,17 +90,25 @@ struct Tail {
 }
 
 impl Factor {
-    pub fn new(n_points: usize, memory_limit: u64) -> Self {
-        Factor {
+    /// An empty factor for a grid of `n_points`; `Error::TooLarge` when its index map cannot
+    /// be allocated.
+    pub fn try_new(n_points: usize, memory_limit: u64) -> Result<Self> {
+        Ok(Factor {
             cap: 0,
             l: Vec::new(),
             idx: Vec::new(),
-            pos: vec![NOT_IN_P; n_points],
+            pos: alloc::try_filled(n_points, NOT_IN_P, "the contact-set index map")?,
             memory_limit,
             tail: None,
             fwd: Vec::new(),
             fwd_ok: 0,
-        }
+        })
+    }
+
+    /// [`Factor::try_new`] for tests, where the sizes are small.
+    #[cfg(test)]
+    pub fn new(n_points: usize, memory_limit: u64) -> Self {
+        Self::try_new(n_points, memory_limit).expect("test grids are small")
     }
 
     /// Forget the cached forward solve (the right-hand side changed).
@@ -136,15 +145,22 @@ impl Factor {
             return Ok(());
         }
         let grown = (self.cap + self.cap / 2).max(k).max(64).min(k_bound.max(k));
+        // While growing, the old factor is copied into the new one: both are held at once.
         let need = Self::bytes_for(grown) + Self::bytes_for(self.cap);
+        let what = format!(
+            "growing the Cholesky factor of the contact block to {grown} rows for {k} contact \
+             points (a {grown}² new factor while the {}² old one is copied into it; \
+             solver='polonsky-keer' needs no factor)",
+            self.cap
+        );
         if need > self.memory_limit {
             return Err(Error::TooLarge {
-                bytes: Self::bytes_for(k),
+                bytes: need,
                 limit: self.memory_limit,
-                what: format!("the Cholesky factor of a {k}-point contact block"),
+                what,
             });
         }
-        let mut l = vec![0.0; grown * grown];
+        let mut l: Vec<f64> = alloc::try_zeroed(grown * grown, &what)?;
         let (old_cap, old_k) = (self.cap, self.idx.len());
         l.par_chunks_mut(grown)
             .take(old_k)
@@ -175,7 +191,22 @@ impl Factor {
             return Ok(());
         }
         self.reserve(k + nb, k_bound)?;
-        let mut r = kernel.cross_block(&self.idx, new);
+        // Working set of the update besides the factor: R (k × nb), S and its kept copy
+        // (nb × nb each) and the Cholesky scratch (about one more nb × nb).
+        let work = 8 * (k as u64 * nb as u64 + 3 * nb as u64 * nb as u64);
+        let need = Self::bytes_for(self.cap).saturating_add(work);
+        if need > self.memory_limit {
+            return Err(Error::TooLarge {
+                bytes: need,
+                limit: self.memory_limit,
+                what: format!(
+                    "adding {nb} points to the Cholesky factor of a {k}-point contact block \
+                     (the {}² factor and the update's {k} × {nb} and {nb} × {nb} blocks)",
+                    self.cap
+                ),
+            });
+        }
+        let mut r = kernel.cross_block(&self.idx, new)?;
         if k > 0 {
             let rm = MatMut::from_column_major_slice_mut(&mut r, k, nb);
             solve_lower_triangular_in_place(self.lower(k), rm, par_for(k * nb));
@@ -534,7 +565,8 @@ impl<'a> LawsonHanson<'a> {
                 format!("must be ≥ 0, got {approach}"),
             ));
         }
-        let b: Vec<f64> = self.h.iter().map(|&hi| approach - (hmax - hi)).collect();
+        let mut b: Vec<f64> = alloc::try_with_capacity(n, "the right-hand side")?;
+        b.extend(self.h.iter().map(|&hi| approach - (hmax - hi)));
         let scale = if hs > 0.0 { hs } else { 1.0 };
         let tol_abs = opts.tol * scale;
         // Contact needs u_i = b_i ≥ 0 (free boundary: u ≥ 0), so the passive set never
@@ -543,8 +575,8 @@ impl<'a> LawsonHanson<'a> {
             crate::operator::Boundary::Free => b.iter().filter(|&&v| v >= 0.0).count(),
             crate::operator::Boundary::Periodic => n,
         };
-        let mut p = vec![0.0; n];
-        let mut u = vec![0.0; n];
+        let mut p: Vec<f64> = alloc::try_zeroed(n, "the pressure field")?;
+        let mut u: Vec<f64> = alloc::try_zeroed(n, "the displacement field")?;
         let mut iterations = 0usize;
         self.factor.new_rhs();
         match start {
@@ -578,7 +610,7 @@ impl<'a> LawsonHanson<'a> {
             iterations += 1;
         }
 
-        let mut skip = vec![false; n];
+        let mut skip: Vec<bool> = alloc::try_zeroed(n, "the skipped-point marks")?;
         let mut skipped: Vec<usize> = Vec::new();
         let mut z: Vec<f64> = Vec::new();
         loop {
@@ -715,7 +747,8 @@ impl<'a> LawsonHanson<'a> {
             }
         }
         // The loop ended right after computing u = C p for the final p.
-        let gap: Vec<f64> = (0..n).map(|i| u[i] - b[i]).collect();
+        let mut gap: Vec<f64> = alloc::try_with_capacity(n, "the gap field")?;
+        gap.extend((0..n).map(|i| u[i] - b[i]));
         let kkt = kkt_certificate(&p, &gap, scale);
         let n_contact = p.iter().filter(|&&v| v > 0.0).count();
         Ok(Solution {
@@ -809,7 +842,7 @@ mod tests {
     /// `C_PP⁻¹ b_P` by a fresh dense Cholesky of the block built directly from the kernel.
     fn dense_solve(ker: &Kernel, idx: &[usize], b: &[f64]) -> Vec<f64> {
         let k = idx.len();
-        let c = ker.block(idx);
+        let c = ker.block(idx).unwrap();
         let cm = Mat::<f64>::from_fn(k, k, |a, bb| c[a + k * bb]);
         let rhs = Mat::<f64>::from_fn(k, 1, |a, _| b[idx[a]]);
         let x = faer::linalg::solvers::Solve::solve(&cm.llt(faer::Side::Lower).unwrap(), &rhs);
@@ -889,7 +922,7 @@ mod tests {
         f.new_rhs();
         f.solve_rhs(&b, &mut x);
         // Residual against the block built directly.
-        let c = ker.block(&f.idx);
+        let c = ker.block(&f.idx).unwrap();
         let k = f.len();
         for r in 0..k {
             let s: f64 = (0..k).map(|cc| c[r + k * cc] * x[cc]).sum();

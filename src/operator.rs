@@ -21,6 +21,7 @@ use realfft::{ComplexToReal, RealFftPlanner, RealToComplex};
 use rustfft::num_complex::Complex64;
 use rustfft::{Fft, FftPlanner};
 
+use crate::alloc;
 use crate::error::{Error, Result};
 use crate::influence::Kernel;
 
@@ -74,27 +75,36 @@ pub struct Operator {
 
 impl Operator {
     /// Bytes held by an operator for an `ny × nx` grid, and the transient peak of building it.
+    /// Saturates at `u64::MAX` for sizes no machine holds.
     pub fn memory_estimate(ny: usize, nx: usize, boundary: Boundary) -> u64 {
         let (py, px) = padded(ny, nx, boundary);
+        let (py, px, ny) = (py as u64, px as u64, ny as u64);
         let pxh = px / 2 + 1;
-        let spec = (py * pxh * 8) as u64;
-        // Building the free kernel spectrum needs the padded kernel's half spectrum.
+        let spec = py.saturating_mul(pxh).saturating_mul(8);
+        // One apply: the ny × pxh half spectrum, allocated with the plans and kept.
+        let apply = ny.saturating_mul(pxh).saturating_mul(16);
+        // Building the free kernel spectrum: the padded kernel and its half spectrum, then
+        // that half spectrum and the spectrum.
         let build = match boundary {
-            Boundary::Free => (py * pxh * 16) as u64,
-            Boundary::Periodic => 0,
+            Boundary::Free => py
+                .saturating_mul(pxh)
+                .saturating_mul(16)
+                .saturating_add(py.saturating_mul(px).saturating_mul(8).max(spec)),
+            Boundary::Periodic => spec,
         };
-        // One apply: the ny × pxh half spectrum.
-        let apply = (ny * pxh * 16) as u64;
-        spec + build.max(apply)
+        apply.saturating_add(build.max(spec))
     }
 
-    /// The free-boundary operator for a Love kernel table.
-    pub fn free(kernel: &Kernel) -> Self {
+    /// The free-boundary operator for a Love kernel table; `Error::TooLarge` when its buffers
+    /// cannot be allocated.
+    pub fn try_free(kernel: &Kernel) -> Result<Self> {
         let (ny, nx) = (kernel.ny, kernel.nx);
         let (py, px) = padded(ny, nx, Boundary::Free);
-        let mut op = Self::plan(ny, nx, py, px, Boundary::Free);
+        let mut op = Self::plan(ny, nx, py, px, Boundary::Free)?;
         // Even circulant layout of K on the padded grid.
-        let mut padded_kernel = vec![0.0; py * px];
+        let cells = alloc::checked_cells(py, px, "the padded kernel")?;
+        let mut padded_kernel: Vec<f64> =
+            alloc::try_zeroed(cells, &format!("the {py} × {px} zero-padded kernel"))?;
         padded_kernel
             .par_chunks_mut(px)
             .enumerate()
@@ -114,18 +124,31 @@ impl Operator {
                     }
                 }
             });
-        op.spec = op.full_spectrum(padded_kernel);
-        op
+        op.spec = op.full_spectrum(padded_kernel)?;
+        Ok(op)
     }
 
-    /// The periodic operator: `û_q = 2 p̂_q / (E* |q|)`, `û_0 = 0`.
+    /// [`Operator::try_free`] for tests, where the sizes are small.
+    #[cfg(test)]
+    pub fn free(kernel: &Kernel) -> Self {
+        Self::try_free(kernel).expect("test operators are small")
+    }
+
+    /// [`Operator::try_periodic`] for tests, where the sizes are small.
+    #[cfg(test)]
     pub fn periodic(ny: usize, nx: usize, dx: f64, e_star: f64) -> Self {
-        let mut op = Self::plan(ny, nx, ny, nx, Boundary::Periodic);
+        Self::try_periodic(ny, nx, dx, e_star).expect("test operators are small")
+    }
+
+    /// The periodic operator: `û_q = 2 p̂_q / (E* |q|)`, `û_0 = 0`; `Error::TooLarge` when
+    /// its buffers cannot be allocated.
+    pub fn try_periodic(ny: usize, nx: usize, dx: f64, e_star: f64) -> Result<Self> {
+        let mut op = Self::plan(ny, nx, ny, nx, Boundary::Periodic)?;
         let norm = 1.0 / (ny * nx) as f64;
         let two_pi = 2.0 * std::f64::consts::PI;
         let (ly, lx) = (ny as f64 * dx, nx as f64 * dx);
         let pxh = op.pxh;
-        let mut spec = vec![0.0; pxh * ny];
+        let mut spec: Vec<f64> = alloc::try_zeroed(pxh * ny, "the stiffness spectrum")?;
         spec.par_chunks_mut(ny).enumerate().for_each(|(c, col)| {
             let qx = two_pi * c as f64 / lx;
             for (r, v) in col.iter_mut().enumerate() {
@@ -144,7 +167,7 @@ impl Operator {
             }
         });
         op.spec = spec;
-        op
+        Ok(op)
     }
 
     /// The inverse of the half-space compliance, `ẑ_q = (E* |q| / 2) ĝ_q`, as a periodic
@@ -154,15 +177,15 @@ impl Operator {
     /// `E* q_min / 2`, `q_min = 2π / max(Py, Px)·dx`. It is symmetric positive definite on the
     /// padded grid, so its restriction to any set of points (the contact set) is too: the
     /// Polonsky–Keer preconditioner for both boundaries.
-    pub fn inverse_compliance(ny: usize, nx: usize, dx: f64, e_star: f64) -> Self {
+    pub fn inverse_compliance(ny: usize, nx: usize, dx: f64, e_star: f64) -> Result<Self> {
         let (py, px) = (smooth_size(ny), smooth_size(nx));
-        let mut op = Self::plan(ny, nx, py, px, Boundary::Periodic);
+        let mut op = Self::plan(ny, nx, py, px, Boundary::Periodic)?;
         let norm = 1.0 / (py * px) as f64;
         let two_pi = 2.0 * std::f64::consts::PI;
         let (ly, lx) = (py as f64 * dx, px as f64 * dx);
         let q_min = two_pi / ly.max(lx);
         let pxh = op.pxh;
-        let mut spec = vec![0.0; pxh * py];
+        let mut spec = alloc::try_zeroed(pxh * py, "the preconditioner spectrum")?;
         spec.par_chunks_mut(py).enumerate().for_each(|(c, col)| {
             let qx = two_pi * c as f64 / lx;
             for (r, v) in col.iter_mut().enumerate() {
@@ -177,30 +200,17 @@ impl Operator {
             }
         });
         op.spec = spec;
-        op
+        Ok(op)
     }
 
-    /// Mean of the operator's diagonal, `(1/N) Σ_q ŝ_q` over the full spectrum (the value of
-    /// the operator's kernel at zero offset).
-    pub fn diagonal(&self) -> f64 {
-        // spec is already divided by py·px; the half spectrum counts each interior column twice.
-        let (py, pxh, px) = (self.py, self.pxh, self.px);
-        let mut s = 0.0;
-        for c in 0..pxh {
-            let w = if c == 0 || (px % 2 == 0 && c == pxh - 1) {
-                1.0
-            } else {
-                2.0
-            };
-            s += w * self.spec[c * py..(c + 1) * py].iter().sum::<f64>();
-        }
-        s
-    }
-
-    fn plan(ny: usize, nx: usize, py: usize, px: usize, boundary: Boundary) -> Self {
+    /// FFT plans and the apply buffer (allocated here, so that `apply` never has to).
+    fn plan(ny: usize, nx: usize, py: usize, px: usize, boundary: Boundary) -> Result<Self> {
+        let pxh = px / 2 + 1;
+        let cells = alloc::checked_cells(ny, pxh, "the half spectrum")?;
+        let half = alloc::try_zeroed(cells, &format!("the {ny} × {pxh} half spectrum"))?;
         let mut rp = RealFftPlanner::<f64>::new();
         let mut cp = FftPlanner::<f64>::new();
-        Operator {
+        Ok(Operator {
             ny,
             nx,
             boundary,
@@ -212,15 +222,16 @@ impl Operator {
             c2r: rp.plan_fft_inverse(px),
             col_fwd: cp.plan_fft_forward(py),
             col_inv: cp.plan_fft_inverse(py),
-            half: Mutex::new(Vec::new()),
-        }
+            half: Mutex::new(half),
+        })
     }
 
     /// Real part of the 2-D FFT of a real even `py × px` field, column-major over the half
     /// spectrum and divided by `py·px`.
-    fn full_spectrum(&self, mut field: Vec<f64>) -> Vec<f64> {
+    fn full_spectrum(&self, mut field: Vec<f64>) -> Result<Vec<f64>> {
         let (py, px, pxh) = (self.py, self.px, self.pxh);
-        let mut half = vec![Complex64::new(0.0, 0.0); py * pxh];
+        let mut half: Vec<Complex64> =
+            alloc::try_zeroed(py * pxh, &format!("the {py} × {pxh} kernel half spectrum"))?;
         half.par_chunks_mut(pxh)
             .zip(field.par_chunks_mut(px))
             .for_each_init(
@@ -233,7 +244,7 @@ impl Operator {
             );
         drop(field);
         let norm = 1.0 / (py * px) as f64;
-        let mut spec = vec![0.0; pxh * py];
+        let mut spec: Vec<f64> = alloc::try_zeroed(pxh * py, "the kernel spectrum")?;
         spec.par_chunks_mut(py).enumerate().for_each_init(
             || {
                 (
@@ -251,7 +262,7 @@ impl Operator {
                 }
             },
         );
-        spec
+        Ok(spec)
     }
 
     /// `u = C p` for row-major `ny × nx` fields.
@@ -351,7 +362,10 @@ unsafe impl Sync for SyncPtr {}
 /// Transform sizes for a grid.
 pub fn padded(ny: usize, nx: usize, boundary: Boundary) -> (usize, usize) {
     match boundary {
-        Boundary::Free => (smooth_size(2 * ny - 1), smooth_size(2 * nx - 1)),
+        Boundary::Free => (
+            smooth_size(ny.saturating_mul(2) - 1),
+            smooth_size(nx.saturating_mul(2) - 1),
+        ),
         Boundary::Periodic => (ny, nx),
     }
 }

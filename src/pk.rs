@@ -110,7 +110,7 @@
 //! ```
 //!
 //! (the last term is dropped when `Σ p = 0`). The solver stops when `kkt ≤ tol`, default
-//! [`DEFAULT_TOL`] `= 1e-10`: reachable in double precision (round-off of `u` is
+//! [`DEFAULT_TOL`] `= 1e-12`: reachable in double precision (round-off of `u` is
 //! `~1e-15 · max |u|`) at a few CG iterations per decade. For a flat surface (`h_s = 0`) the
 //! scale is `Δ` (displacement control) or `p̄ · C_00` (load control), `C_00 = 4 dx ln(1+√2)/(π E*)`.
 //!
@@ -124,9 +124,10 @@ use std::time::{Duration, Instant};
 
 use rayon::prelude::*;
 
+use crate::alloc;
 use crate::error::{Error, Result};
 use crate::influence::{love_displacement, Kernel};
-use crate::operator::{check_shape, padded, Boundary, Operator};
+use crate::operator::{check_shape, padded, smooth_size, Boundary, Operator};
 
 /// Default KKT tolerance, relative to the height range.
 pub const DEFAULT_TOL: f64 = 1e-12;
@@ -273,19 +274,29 @@ pub fn memory_estimate(ny: usize, nx: usize, boundary: Boundary) -> u64 {
     let spec = py.saturating_mul(pxh).saturating_mul(8);
     let apply = (ny as u64).saturating_mul(pxh).saturating_mul(16);
     let build = match boundary {
-        // Kernel table, then the padded real kernel and its half spectrum together, then the
-        // half spectrum with the spectrum.
+        // Kernel table and the operator's apply buffer, then the padded real kernel and its
+        // half spectrum together, then the half spectrum with the spectrum.
         Boundary::Free => {
             let padded_kernel = py.saturating_mul(px).saturating_mul(8);
             let half = py.saturating_mul(pxh).saturating_mul(16);
             n.saturating_mul(8)
+                .saturating_add(apply)
                 .saturating_add(half.saturating_add(padded_kernel.max(spec)))
         }
-        Boundary::Periodic => spec,
+        Boundary::Periodic => spec.saturating_add(apply),
     };
+    // The preconditioner: its spectrum and apply buffer on the smooth-padded grid, and z.
+    let (qy, qx) = (smooth_size(ny) as u64, smooth_size(nx) as u64);
+    let qxh = qx / 2 + 1;
+    let pre = qy
+        .saturating_mul(qxh)
+        .saturating_mul(8)
+        .saturating_add((ny as u64).saturating_mul(qxh).saturating_mul(16))
+        .saturating_add(n.saturating_mul(8));
     let iterate = spec
         .saturating_add(apply)
-        .saturating_add(n.saturating_mul(6 * 8));
+        .saturating_add(n.saturating_mul(6 * 8))
+        .saturating_add(pre);
     n.saturating_mul(8).saturating_add(build.max(iterate))
 }
 
@@ -325,8 +336,10 @@ pub fn solve(problem: &Problem, control: Control, opts: &Options) -> Result<Solu
         }
     }
     let op = match problem.boundary {
-        Boundary::Free => Operator::free(&Kernel::new(ny, nx, problem.dx, problem.e_star)),
-        Boundary::Periodic => Operator::periodic(ny, nx, problem.dx, problem.e_star),
+        Boundary::Free => {
+            Operator::try_free(&Kernel::try_new(ny, nx, problem.dx, problem.e_star)?)?
+        }
+        Boundary::Periodic => Operator::try_periodic(ny, nx, problem.dx, problem.e_star)?,
     };
     run(&op, problem, control, opts)
 }
@@ -978,7 +991,9 @@ impl Work<'_> {
         if self.table.is_empty() {
             self.r.fill(0.0);
             self.r[0] = 1.0;
-            let mut table = vec![0.0; self.r.len()];
+            // Its capacity was reserved (fallibly) with the other work arrays.
+            let mut table = std::mem::take(&mut self.table);
+            table.resize(self.r.len(), 0.0);
             self.op.apply(&self.r, &mut table);
             self.applies += 1;
             self.table = table;
@@ -1203,14 +1218,22 @@ fn run(op: &Operator, problem: &Problem, control: Control, opts: &Options) -> Re
         op,
         h,
         hmax,
-        p: vec![0.0; n],
-        u: if u_in_r { Vec::new() } else { vec![0.0; n] },
+        p: alloc::try_zeroed(n, "the pressure field")?,
+        u: if u_in_r {
+            Vec::new()
+        } else {
+            alloc::try_zeroed(n, "the displacement field")?
+        },
         u_in_r,
-        g: vec![0.0; n],
-        t: vec![0.0; n],
-        r: vec![0.0; n],
-        table: Vec::new(),
-        slots: vec![(0, 0.0); n_chunks * SPARSE_MAX],
+        g: alloc::try_zeroed(n, "the gap field")?,
+        t: alloc::try_zeroed(n, "the conjugate direction")?,
+        r: alloc::try_zeroed(n, "the operator work field")?,
+        table: alloc::try_with_capacity(n, "the influence table")?,
+        slots: alloc::try_filled(
+            n_chunks * SPARSE_MAX,
+            (0, 0.0),
+            "the sparse-correction slots",
+        )?,
         changes: Vec::with_capacity(SPARSE_MAX),
         ny,
         nx,
@@ -1222,9 +1245,9 @@ fn run(op: &Operator, problem: &Problem, control: Control, opts: &Options) -> Re
         pre_applies: 0,
     };
     if opts.precondition {
-        let pre = Operator::inverse_compliance(ny, nx, problem.dx, problem.e_star);
+        let pre = Operator::inverse_compliance(ny, nx, problem.dx, problem.e_star)?;
         w.pre = Some(pre);
-        w.z = vec![0.0; n];
+        w.z = alloc::try_zeroed(n, "the preconditioned residual")?;
     }
 
     // Initial pressure: the warm start, or p = 0 (displacement) / uniform p̄ (load, the paper's).

@@ -1,8 +1,14 @@
 //! PyO3 bindings: numpy in, numpy out, the GIL released around long work, every core error
 //! mapped to a Python exception. No numerics live here.
 
+use std::any::Any;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{sync_channel, RecvTimeoutError};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
 use numpy::{PyArray2, PyArrayMethods};
-use pyo3::exceptions::PyKeyboardInterrupt;
+use pyo3::exceptions::{PyKeyboardInterrupt, PyRuntimeError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
@@ -76,6 +82,128 @@ fn on_solver_pool<T: Send>(cells: usize, f: impl FnOnce() -> T + Send) -> T {
     rayon::scope(|_| f())
 }
 
+/// How often the calling thread runs Python's signal handlers while a worker computes.
+const SIGNAL_POLL: Duration = Duration::from_millis(20);
+
+/// Runs `work` on a worker thread with the GIL released, while the calling thread waits in
+/// short timed waits and runs Python's signal handlers between them. CPython runs signal
+/// handlers on the main thread only, so the work itself (on the worker and rayon's threads)
+/// cannot see Ctrl-C; the waiting thread can. When a handler raises (KeyboardInterrupt for
+/// Ctrl-C), `stop` is set — the solvers poll it — the worker is joined and the handler's
+/// exception is raised. A panic in the work becomes a `RuntimeError`, never a crash.
+fn interruptible<T: Send>(
+    py: Python<'_>,
+    work: impl FnOnce(&AtomicBool) -> T + Send,
+) -> PyResult<T> {
+    let stop = AtomicBool::new(false);
+    let stop = &stop;
+    py.detach(move || {
+        std::thread::scope(|s| {
+            let (done, finished) = sync_channel::<()>(1);
+            let worker = std::thread::Builder::new()
+                .name("leakpath-work".into())
+                .spawn_scoped(s, move || {
+                    let out = work(stop);
+                    let _ = done.send(());
+                    out
+                })
+                .map_err(|e| PyRuntimeError::new_err(format!("cannot start a thread: {e}")))?;
+            let mut raised: Option<PyErr> = None;
+            // A disconnected channel means the worker ended without sending: it panicked.
+            while let Err(RecvTimeoutError::Timeout) = finished.recv_timeout(SIGNAL_POLL) {
+                if raised.is_none() {
+                    if let Err(e) = Python::attach(|py| py.check_signals()) {
+                        stop.store(true, Ordering::Relaxed);
+                        raised = Some(e);
+                    }
+                }
+            }
+            let joined = worker.join();
+            if let Some(e) = raised {
+                return Err(e);
+            }
+            joined.map_err(internal_error)
+        })
+    })
+}
+
+/// How long an interrupted computation that owns its data may take to notice the stop flag
+/// before the caller stops waiting for it.
+const STOP_GRACE: Duration = Duration::from_millis(200);
+
+/// [`interruptible`] for work that owns its data: after a signal handler raised, the worker
+/// gets [`STOP_GRACE`] to see `stop`; if it is inside one long step (a blocked Cholesky update
+/// of a large contact block can take seconds) the caller raises anyway and the worker, left
+/// to finish on its own, drops its result at its next poll of `stop`.
+fn interruptible_owned<T: Send + 'static>(
+    py: Python<'_>,
+    work: impl FnOnce(&AtomicBool) -> T + Send + 'static,
+) -> PyResult<T> {
+    let stop = Arc::new(AtomicBool::new(false));
+    let flag = Arc::clone(&stop);
+    let (done, finished) = sync_channel(1);
+    let worker = std::thread::Builder::new()
+        .name("leakpath-work".into())
+        .spawn(move || {
+            let out = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| work(&flag)));
+            let _ = done.send(out);
+        })
+        .map_err(|e| PyRuntimeError::new_err(format!("cannot start a thread: {e}")))?;
+    py.detach(move || {
+        let mut raised: Option<(PyErr, Instant)> = None;
+        loop {
+            match finished.recv_timeout(SIGNAL_POLL) {
+                Ok(out) => {
+                    let _ = worker.join();
+                    return match raised {
+                        Some((e, _)) => Err(e),
+                        None => out.map_err(internal_error),
+                    };
+                }
+                Err(RecvTimeoutError::Disconnected) => {
+                    return Err(PyRuntimeError::new_err(
+                        "internal error: a worker thread vanished",
+                    ))
+                }
+                Err(RecvTimeoutError::Timeout) => match raised.take() {
+                    None => {
+                        if let Err(e) = Python::attach(|py| py.check_signals()) {
+                            stop.store(true, Ordering::Relaxed);
+                            raised = Some((e, Instant::now()));
+                        }
+                    }
+                    // Detach the worker (dropping its handle): it stops at its next poll.
+                    Some((e, at)) if at.elapsed() >= STOP_GRACE => return Err(e),
+                    kept => raised = kept,
+                },
+            }
+        }
+    })
+}
+
+/// The `RuntimeError` for a panic in the core (a bug: no input should cause one).
+fn internal_error(panic: Box<dyn Any + Send>) -> PyErr {
+    let msg = panic
+        .downcast_ref::<&str>()
+        .map(|s| s.to_string())
+        .or_else(|| panic.downcast_ref::<String>().cloned())
+        .unwrap_or_default();
+    PyRuntimeError::new_err(format!("internal error in leakpath's core: {msg}"))
+}
+
+/// The solvers' `should_stop`: set by [`interruptible`] when a signal handler raised.
+fn stop_flag(stop: &AtomicBool) -> impl Fn() -> bool + Sync + '_ {
+    move || stop.load(Ordering::Relaxed)
+}
+
+/// The default memory limit in bytes: `leakpath._memory.memory_limit()`, the one definition
+/// of what this process may still allocate (cgroup, ulimits, available memory).
+fn default_memory_limit(py: Python<'_>) -> PyResult<u64> {
+    py.import("leakpath._memory")?
+        .call_method0("memory_limit")?
+        .extract()
+}
+
 fn check_positive(name: &'static str, v: f64) -> PyResult<()> {
     if !(v.is_finite() && v > 0.0) {
         return Err(to_py(Error::invalid(
@@ -87,14 +215,17 @@ fn check_positive(name: &'static str, v: f64) -> PyResult<()> {
 }
 
 /// Love kernel table K[|di|, |dj|] (shape (ny, nx)) for element size dx and contact modulus E*.
+/// Refused with `ProblemTooLargeError` when its ny·nx·8 bytes exceed `memory_limit` (default:
+/// `leakpath._memory.memory_limit()`).
 #[pyfunction]
-#[pyo3(signature = (ny, nx, dx, e_star))]
+#[pyo3(signature = (ny, nx, dx, e_star, memory_limit=None))]
 fn kernel_table<'py>(
     py: Python<'py>,
     ny: usize,
     nx: usize,
     dx: f64,
     e_star: f64,
+    memory_limit: Option<u64>,
 ) -> PyResult<Bound<'py, PyArray2<f64>>> {
     if ny == 0 || nx == 0 {
         return Err(to_py(Error::invalid(
@@ -104,7 +235,18 @@ fn kernel_table<'py>(
     }
     check_positive("dx", dx)?;
     check_positive("e_star", e_star)?;
-    let table = py.detach(|| influence::kernel_table(ny, nx, dx, e_star));
+    let what = format!("the {ny} × {nx} kernel table");
+    let cells = crate::alloc::checked_cells(ny, nx, &what).map_err(to_py)?;
+    let bytes = crate::alloc::bytes_of::<f64>(cells, &what).map_err(to_py)?;
+    let limit = match memory_limit {
+        Some(l) => l,
+        None => default_memory_limit(py)?,
+    };
+    if bytes > limit {
+        return Err(to_py(Error::TooLarge { bytes, limit, what }));
+    }
+    let table = interruptible_owned(py, move |_| influence::try_kernel_table(ny, nx, dx, e_star))?
+        .map_err(to_py)?;
     let arr = numpy::PyArray1::from_vec(py, table);
     arr.reshape([ny, nx])
 }
@@ -134,10 +276,24 @@ mod clusters_py {
         }
     }
 
+    /// Most threads a call may ask for: four per available core. More only adds threads
+    /// that wait for a core; a count like 2⁴⁰ would try to start them all.
+    fn max_threads() -> usize {
+        4 * std::thread::available_parallelism().map_or(1, |n| n.get())
+    }
+
     fn check_threads(threads: Option<i64>) -> PyResult<Option<usize>> {
+        let max = max_threads();
         match threads {
             None => Ok(None),
-            Some(t) if t >= 1 => Ok(Some(t as usize)),
+            Some(t) if t >= 1 && t as u64 <= max as u64 => Ok(Some(t as usize)),
+            Some(t) if t >= 1 => Err(to_py(Error::invalid(
+                "threads",
+                format!(
+                    "{t} is more than {max} (four per available core); pass at most {max}, or \
+                     None for all cores"
+                ),
+            ))),
             Some(t) => Err(to_py(Error::invalid(
                 "threads",
                 format!("must be at least 1 (or None for all cores), got {t}"),
@@ -145,35 +301,37 @@ mod clusters_py {
         }
     }
 
-    /// Runs `f` on a pool of `threads` threads, or on rayon's global pool. Pools of up to
-    /// `MAX_KEPT` threads are kept for later calls: starting threads per call would cost more
-    /// than labelling a small grid, and their per-thread buffers would be lost each time.
+    /// Runs `f` on a pool of `threads` threads, or on rayon's global pool. The `KEPT` most
+    /// recently used pools are kept for later calls: starting threads per call would cost
+    /// more than labelling a small grid, and their per-thread buffers would be lost each
+    /// time. Older pools are dropped, which ends their threads, so calls with many different
+    /// counts do not pile up threads.
     fn in_pool<T: Send>(threads: Option<usize>, f: impl FnOnce() -> T + Send) -> PyResult<T> {
-        const MAX_KEPT: usize = 64;
+        const KEPT: usize = 2;
         static POOLS: Mutex<Vec<(usize, Arc<rayon::ThreadPool>)>> = Mutex::new(Vec::new());
         let Some(n) = threads else {
             return Ok(f());
         };
-        let build = || {
-            rayon::ThreadPoolBuilder::new()
-                .num_threads(n)
-                .build()
-                .map(Arc::new)
-                .map_err(|e| PyRuntimeError::new_err(format!("cannot start {n} threads: {e}")))
-        };
-        let pool = if n <= MAX_KEPT {
+        let pool = {
             // A panic elsewhere cannot leave the list inconsistent: keep using it.
             let mut pools = POOLS.lock().unwrap_or_else(|e| e.into_inner());
-            match pools.iter().find(|(k, _)| *k == n) {
-                Some((_, p)) => Arc::clone(p),
+            let entry = match pools.iter().position(|(k, _)| *k == n) {
+                Some(i) => pools.remove(i),
                 None => {
-                    let p = build()?;
-                    pools.push((n, Arc::clone(&p)));
-                    p
+                    let p = rayon::ThreadPoolBuilder::new()
+                        .num_threads(n)
+                        .thread_name(|i| format!("leakpath-clusters-{i}"))
+                        .build()
+                        .map_err(|e| {
+                            PyRuntimeError::new_err(format!("cannot start {n} threads: {e}"))
+                        })?;
+                    (n, Arc::new(p))
                 }
-            }
-        } else {
-            build()?
+            };
+            let pool = Arc::clone(&entry.1);
+            pools.insert(0, entry);
+            pools.truncate(KEPT);
+            pool
         };
         Ok(pool.install(f))
     }
@@ -184,7 +342,16 @@ mod clusters_py {
     fn zeros_u32(py: Python<'_>, ny: usize, nx: usize) -> PyResult<Bound<'_, PyArray2<u32>>> {
         let arr = py
             .import("numpy")?
-            .call_method1("zeros", ((ny, nx), "uint32"))?;
+            .call_method1("zeros", ((ny, nx), "uint32"))
+            .map_err(|e| {
+                if e.is_instance_of::<pyo3::exceptions::PyMemoryError>(py) {
+                    let what = format!("the cluster labels of a {ny} × {nx} grid");
+                    let bytes = (ny as u64).saturating_mul(nx as u64).saturating_mul(4);
+                    to_py(crate::alloc::refused(bytes, &what))
+                } else {
+                    e
+                }
+            })?;
         Ok(arr.cast_into::<PyArray2<u32>>()?)
     }
 
@@ -216,11 +383,11 @@ mod clusters_py {
         let n = {
             let mut rw = labels.readwrite();
             let out = rw.as_slice_mut()?;
-            py.detach(|| {
+            super::interruptible(py, |_| {
                 in_pool(threads, || {
                     clusters::label_into(&FreeMask(cells), ny, nx, conn, per, out)
                 })
-            })?
+            })??
             .map_err(to_py)?
         };
         Ok((labels, n))
@@ -273,7 +440,7 @@ mod clusters_py {
         let (cl, class) = {
             let mut rw = labels.readwrite();
             let out = rw.as_slice_mut()?;
-            py.detach(|| {
+            super::interruptible(py, |_| {
                 in_pool(threads, || {
                     let cl = match c {
                         Some(c) => {
@@ -286,7 +453,7 @@ mod clusters_py {
                     let class = clusters::classify(&cl, flow)?;
                     Ok::<_, Error>((cl, class))
                 })
-            })?
+            })??
             .map_err(to_py)?
         };
         let d = PyDict::new(py);
@@ -316,11 +483,17 @@ mod clusters_py {
 // A surface on an elastic half-space: kernel table, FFT operator and the Lawson–Hanson factor,
 // kept across solves so a sweep can warm-start (core: influence.rs, operator.rs, nnls.rs).
 mod contact_py {
-    use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
+    use std::sync::Arc;
+
+    use numpy::{
+        PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2,
+        PyUntypedArrayMethods,
+    };
     use pyo3::prelude::*;
     use pyo3::types::PyDict;
 
     use super::{check_positive, to_py};
+    use crate::alloc;
     use crate::error::Error;
     use crate::influence::Kernel;
     use crate::nnls::{Factor, LawsonHanson, Options, Pivoting, Start};
@@ -355,7 +528,9 @@ mod contact_py {
                 "must have at least one point",
             )));
         }
-        let v: Vec<f64> = a.iter().copied().collect();
+        let mut v: Vec<f64> =
+            alloc::try_with_capacity(ny * nx, "a copy of the heights").map_err(to_py)?;
+        v.extend(a.iter().copied());
         if v.iter().any(|x| !x.is_finite()) {
             return Err(to_py(Error::invalid(
                 "heights",
@@ -368,66 +543,87 @@ mod contact_py {
     /// An elastic rough surface against a rigid flat, ready to be solved at many approaches.
     #[pyclass(name = "ContactProblem", module = "leakpath._core")]
     pub(super) struct ContactProblem {
-        kernel: Kernel,
+        kernel: Arc<Kernel>,
         /// Shared with the Polonsky–Keer binding, which reuses it across solves.
-        pub(super) op: Operator,
-        h: Vec<f64>,
-        factor: Factor,
+        pub(super) op: Arc<Operator>,
+        h: Arc<Vec<f64>>,
+        /// `None` while a solve runs, and after an interrupted one (whose worker may still
+        /// hold it): the next solve then starts a fresh factor.
+        factor: Option<Factor>,
+        memory_limit: u64,
     }
 
     #[pymethods]
     impl ContactProblem {
         #[new]
-        #[pyo3(signature = (heights, dx, e_star, boundary="free", memory_limit=8u64 << 30))]
+        #[pyo3(signature = (heights, dx, e_star, boundary="free", memory_limit=None))]
         fn new(
             py: Python<'_>,
             heights: PyReadonlyArray2<'_, f64>,
             dx: f64,
             e_star: f64,
             boundary: &str,
-            memory_limit: u64,
+            memory_limit: Option<u64>,
         ) -> PyResult<Self> {
             check_positive("dx", dx)?;
             check_positive("e_star", e_star)?;
             let bc = boundary_from(boundary)?;
-            let (h, ny, nx) = heights_vec(&heights)?;
-            let need = Operator::memory_estimate(ny, nx, bc) + (ny * nx * 8 * 8) as u64;
+            let memory_limit = match memory_limit {
+                Some(l) => l,
+                None => super::default_memory_limit(py)?,
+            };
+            let [ny, nx] = [heights.shape()[0], heights.shape()[1]];
+            // Kernel table, heights, the solvers' fields (p, u, g, b, …) and the FFT operator
+            // with the transient peak of building it.
+            let need = Operator::memory_estimate(ny, nx, bc)
+                .saturating_add((ny as u64).saturating_mul(nx as u64).saturating_mul(64));
             if need > memory_limit {
                 return Err(to_py(Error::TooLarge {
                     bytes: need,
                     limit: memory_limit,
-                    what: format!("the influence operator of a {ny} × {nx} grid"),
+                    what: format!(
+                        "the contact problem of a {ny} × {nx} grid (kernel table, FFT operator \
+                         and solution fields)"
+                    ),
                 }));
             }
-            let (kernel, op) = py.detach(|| match bc {
-                Boundary::Free => {
-                    let kernel = Kernel::new(ny, nx, dx, e_star);
-                    let op = Operator::free(&kernel);
-                    (kernel, op)
-                }
-                Boundary::Periodic => {
-                    // The periodic C_PP blocks come from the circulant's first column.
-                    let op = Operator::periodic(ny, nx, dx, e_star);
-                    let mut unit = vec![0.0; ny * nx];
-                    unit[0] = 1.0;
-                    let mut column = vec![0.0; ny * nx];
-                    op.apply(&unit, &mut column);
-                    (Kernel::from_table(ny, nx, dx, e_star, column), op)
-                }
-            });
+            let (h, ny, nx) = heights_vec(&heights)?;
+            // Building the kernel and the operator of a large grid takes seconds and cannot
+            // stop half-way: the owned variant lets Ctrl-C return at once.
+            let built = super::interruptible_owned(py, move |_| -> Result<_, Error> {
+                Ok(match bc {
+                    Boundary::Free => {
+                        let kernel = Kernel::try_new(ny, nx, dx, e_star)?;
+                        let op = Operator::try_free(&kernel)?;
+                        (kernel, op)
+                    }
+                    Boundary::Periodic => {
+                        // The periodic C_PP blocks come from the circulant's first column.
+                        let op = Operator::try_periodic(ny, nx, dx, e_star)?;
+                        let mut unit: Vec<f64> = alloc::try_zeroed(ny * nx, "a unit load")?;
+                        unit[0] = 1.0;
+                        let mut column: Vec<f64> =
+                            alloc::try_zeroed(ny * nx, "the periodic kernel table")?;
+                        op.apply(&unit, &mut column);
+                        (Kernel::from_table(ny, nx, dx, e_star, column), op)
+                    }
+                })
+            })?;
+            let (kernel, op) = built.map_err(to_py)?;
             let n = h.len();
             Ok(ContactProblem {
-                kernel,
-                op,
-                h,
-                factor: Factor::new(n, memory_limit),
+                kernel: Arc::new(kernel),
+                op: Arc::new(op),
+                h: Arc::new(h),
+                factor: Some(Factor::try_new(n, memory_limit).map_err(to_py)?),
+                memory_limit,
             })
         }
 
         /// Number of points in the passive (contact) set kept from the last solve.
         #[getter]
         fn n_passive(&self) -> usize {
-            self.factor.len()
+            self.factor.as_ref().map_or(0, Factor::len)
         }
 
         /// u = C p by FFT (shape (ny, nx)).
@@ -471,7 +667,7 @@ mod contact_py {
                 })
                 .collect::<PyResult<_>>()?;
             let k = idx.len();
-            let b = py.detach(|| self.kernel.block(&idx));
+            let b = py.detach(|| self.kernel.block(&idx)).map_err(to_py)?;
             // Column-major and symmetric: the same numbers read row-major.
             PyArray1::from_vec(py, b).reshape([k, k])
         }
@@ -541,30 +737,29 @@ mod contact_py {
             let start_kind = start.to_string();
             let t0 = std::time::Instant::now();
             let (ny, nx) = (self.op.ny, self.op.nx);
-            let ContactProblem {
-                kernel,
-                op,
-                h,
-                factor,
-            } = self;
-            let result = py.detach(|| {
-                let mut lh = LawsonHanson::new(kernel, op, h, factor);
-                let last = std::sync::Mutex::new(std::time::Instant::now());
-                let should_stop = || {
-                    let mut t = last.lock().unwrap_or_else(|e| e.into_inner());
-                    if t.elapsed().as_millis() < 100 {
-                        return false;
-                    }
-                    *t = std::time::Instant::now();
-                    Python::attach(|py| py.check_signals().is_err())
-                };
+            let mut factor = match self.factor.take() {
+                Some(f) => f,
+                None => Factor::try_new(n, self.memory_limit).map_err(to_py)?,
+            };
+            let (kernel, op, h) = (
+                Arc::clone(&self.kernel),
+                Arc::clone(&self.op),
+                Arc::clone(&self.h),
+            );
+            let (result, factor) = super::interruptible_owned(py, move |stop| {
+                let should_stop = super::stop_flag(stop);
                 let start = match (start_kind.as_str(), &set) {
                     ("previous", _) => Start::Previous,
                     (_, Some(s)) => Start::Set(s),
                     _ => Start::Cold,
                 };
-                super::on_solver_pool(ny * nx, || lh.solve(approach, start, &opts, &should_stop))
-            });
+                let mut lh = LawsonHanson::new(&kernel, &op, &h, &mut factor);
+                let result = super::on_solver_pool(ny * nx, || {
+                    lh.solve(approach, start, &opts, &should_stop)
+                });
+                (result, factor)
+            })?;
+            self.factor = Some(factor);
             let sol = result.map_err(to_py)?;
             let seconds = t0.elapsed().as_secs_f64();
             let d = PyDict::new(py);
@@ -586,21 +781,17 @@ mod contact_py {
 // Polonsky–Keer constrained conjugate gradients on the FFT operator (core: pk.rs).
 mod pk_py {
     use std::borrow::Cow;
-    use std::panic::{catch_unwind, AssertUnwindSafe};
     use std::time::Instant;
 
     use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray2, PyUntypedArrayMethods};
-    use pyo3::exceptions::PyRuntimeError;
     use pyo3::prelude::*;
     use pyo3::types::PyDict;
 
     use super::to_py;
+    use crate::alloc;
     use crate::error::Error;
     use crate::operator::Boundary;
     use crate::pk::{self, Control, Options, Problem};
-
-    /// Default `memory_limit`: 8 GiB.
-    const DEFAULT_MEMORY_LIMIT: u64 = 8 << 30;
 
     fn invalid(name: &'static str, msg: String) -> PyErr {
         to_py(Error::invalid(name, msg))
@@ -641,7 +832,7 @@ mod pk_py {
         precondition: bool,
         operator_of: Option<PyRef<'py, super::contact_py::ContactProblem>>,
     ) -> PyResult<Bound<'py, PyDict>> {
-        let op = operator_of.as_ref().map(|cp| &cp.op);
+        let op = operator_of.as_ref().map(|cp| std::sync::Arc::clone(&cp.op));
         let [ny, nx] = [heights.shape()[0], heights.shape()[1]];
         let control = match (approach, mean_pressure) {
             (Some(d), None) => Control::Approach(d),
@@ -677,55 +868,65 @@ mod pk_py {
                 ));
             }
         }
-        let h = row_major(&heights);
-        let h: &[f64] = &h;
-        let p0 = initial_pressure.as_ref().map(row_major);
-        let p0: Option<&[f64]> = p0.as_deref();
-        let problem = Problem {
-            heights: h,
-            ny,
-            nx,
-            dx,
-            e_star,
-            boundary,
-        };
         let tol = tol.unwrap_or(pk::DEFAULT_TOL);
-        let memory_limit = memory_limit.unwrap_or(DEFAULT_MEMORY_LIMIT);
+        let memory_limit = match memory_limit {
+            Some(l) => l,
+            None => super::default_memory_limit(py)?,
+        };
+        // Refuse before copying anything (the estimate includes the copy of the heights).
+        let need = pk::memory_estimate(ny, nx, boundary);
+        if need > memory_limit {
+            let kind = match boundary {
+                Boundary::Free => "free",
+                Boundary::Periodic => "periodic",
+            };
+            return Err(to_py(Error::TooLarge {
+                bytes: need,
+                limit: memory_limit,
+                what: format!("Polonsky–Keer on a {ny} × {nx} {kind} grid"),
+            }));
+        }
+        // The solve owns its inputs, so that Ctrl-C can return while the operator of a large
+        // grid is still being built (see `interruptible_owned`).
+        let owned = |a: &PyReadonlyArray2<'_, f64>, what: &str| -> PyResult<Vec<f64>> {
+            let src = row_major(a);
+            let mut v = alloc::try_with_capacity(src.len(), what).map_err(to_py)?;
+            v.extend_from_slice(&src);
+            Ok(v)
+        };
+        let h = owned(&heights, "a copy of the heights")?;
+        let p0 = match &initial_pressure {
+            Some(a) => Some(owned(a, "a copy of the initial pressure")?),
+            None => None,
+        };
         let start = Instant::now();
-        let outcome = py.detach(|| {
-            // Ctrl-C: the solver polls this between iterations; check_signals runs Python's
-            // handler, which raises KeyboardInterrupt, reported here as Error::Interrupted.
-            let stop = || Python::attach(|py| py.check_signals().is_err());
+        let outcome = super::interruptible_owned(py, move |stop| {
+            let problem = Problem {
+                heights: &h,
+                ny,
+                nx,
+                dx,
+                e_star,
+                boundary,
+            };
+            // Ctrl-C: the solver polls this flag between iterations (see `interruptible`).
+            let should_stop = super::stop_flag(stop);
             let opts = Options {
                 tol,
                 max_iter,
-                initial_pressure: p0,
+                initial_pressure: p0.as_deref(),
                 memory_limit: Some(memory_limit),
-                should_stop: Some(&stop),
+                should_stop: Some(&should_stop),
                 precondition,
             };
-            catch_unwind(AssertUnwindSafe(|| {
-                super::on_solver_pool(ny * nx, || match op {
-                    // The operator of a kept ContactProblem: no kernel or FFT set-up per solve.
-                    Some(op) => pk::solve_with_operator(op, &problem, control, &opts),
-                    None => pk::solve(&problem, control, &opts),
-                })
-            }))
-        });
+            super::on_solver_pool(ny * nx, || match &op {
+                // The operator of a kept ContactProblem: no kernel or FFT set-up per solve.
+                Some(op) => pk::solve_with_operator(op, &problem, control, &opts),
+                None => pk::solve(&problem, control, &opts),
+            })
+        })?;
         let seconds = start.elapsed().as_secs_f64();
-        let sol = match outcome {
-            Ok(r) => r.map_err(to_py)?,
-            Err(panic) => {
-                let msg = panic
-                    .downcast_ref::<&str>()
-                    .map(|s| s.to_string())
-                    .or_else(|| panic.downcast_ref::<String>().cloned())
-                    .unwrap_or_default();
-                return Err(PyRuntimeError::new_err(format!(
-                    "internal error in the Polonsky–Keer solver: {msg}"
-                )));
-            }
-        };
+        let sol = outcome.map_err(to_py)?;
         let d = PyDict::new(py);
         d.set_item(
             "pressure",

@@ -5,12 +5,16 @@ import numpy.typing as npt
 
 __version__: str
 
-def kernel_table(ny: int, nx: int, dx: float, e_star: float) -> npt.NDArray[np.float64]:
+def kernel_table(
+    ny: int, nx: int, dx: float, e_star: float, memory_limit: int | None = None
+) -> npt.NDArray[np.float64]:
     """Love influence table ``K[|di|, |dj|]``, shape ``(ny, nx)``.
 
     Displacement at the centre of an element ``di`` rows and ``dj`` columns away from a
     ``dx × dx`` element under unit uniform pressure, on a half-space of contact modulus
     ``e_star``. ``K[0, 0] = 4·dx·ln(1 + √2)/(π E*)``; far away ``K → dx²/(π E* r)``.
+    ``ProblemTooLargeError`` before allocating when ``8·ny·nx`` bytes exceed ``memory_limit``
+    (default :func:`leakpath._memory.memory_limit`) or overflow.
     """
 
 # ---- polonsky-keer ----
@@ -46,8 +50,10 @@ def solve_polonsky_keer(
     ``1e-10``). ``max_iter``: default ``max(5000, ⌈100·N^¼⌉)``; exceeding it raises
     ``RuntimeError``. ``initial_pressure``: warm start (same shape; negatives clipped; rescaled
     to the load in load control); cold start is ``p = 0`` (displacement) or uniform ``p̄``
-    (load). ``memory_limit`` (bytes, default 8 GiB): ``MemoryError`` up front when the solve
-    would need more. The GIL is released; Ctrl-C raises ``KeyboardInterrupt``.
+    (load). ``memory_limit`` (bytes, default :func:`leakpath._memory.memory_limit`):
+    ``ProblemTooLargeError`` (a ``MemoryError``) up front when the solve would need more, or
+    when an allocation fails. The GIL is released; Ctrl-C raises ``KeyboardInterrupt`` within
+    a fraction of a second.
 
     Returns a dict: ``pressure``, ``displacement``, ``gap`` (``(ny, nx)`` float64; the gap is
     not clamped), ``approach``, ``iterations`` (CG steps), ``applies`` (FFT convolutions),
@@ -65,8 +71,10 @@ class ContactProblem:
         dx: float,
         e_star: float,
         boundary: str = "free",
-        memory_limit: int = ...,
-    ) -> None: ...
+        memory_limit: int | None = None,
+    ) -> None:
+        """``memory_limit`` (bytes): default :func:`leakpath._memory.memory_limit`; bounds
+        the operator and the growing Cholesky factor (``ProblemTooLargeError`` beyond it)."""
     @property
     def n_passive(self) -> int:
         """Points in the contact (passive) set kept from the last solve."""
@@ -103,8 +111,9 @@ def label_clusters(
     Returns ``(labels, K)``: ``uint32`` labels of the mask's shape, 0 on non-free cells and
     ``1..K`` on free cells in raster order of each cluster's first cell. ``connectivity`` 4
     (edge neighbours) or 8 (edges and corners); ``periodic_axis0``/``periodic_axis1`` make the
-    first and last row/column neighbours. ``threads``: rayon threads (default all cores); the
-    result does not depend on it. The GIL is released. Bad arguments raise ``ValueError``.
+    first and last row/column neighbours. ``threads``: rayon threads (default all cores; at
+    most four per available core); the result does not depend on it. The GIL is released;
+    Ctrl-C raises ``KeyboardInterrupt``. Bad arguments raise ``ValueError``.
     """
 
 def classify_clusters(

@@ -777,6 +777,8 @@ def _cmd_ensemble(args: argparse.Namespace) -> int:
             overwrite=args.overwrite,
             progress=True,
             figures=not args.no_figures,
+            E=args.E,
+            nu=args.nu,
         )
     except (FileExistsError, ImportError) as exc:
         raise UsageError(str(exc)) from None
@@ -838,6 +840,8 @@ def _add_ensemble_parser(subparsers: Any) -> None:
     p.add_argument(
         "--cold", action="store_true", help="solve every level from p = 0 (no warm start)"
     )
+    p.add_argument("--E", type=float, default=1.0, help="Young's modulus (default 1)")
+    p.add_argument("--nu", type=float, default=0.0, help="Poisson's ratio (default 0)")
     p.add_argument(
         "--workers",
         type=_positive_int,

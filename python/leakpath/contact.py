@@ -50,12 +50,12 @@ AUTO_ACTIVE_SET_MAX_POINTS = 48 * 48
 
 
 def default_memory_limit() -> int:
-    """Bytes leakpath may use for one solve: 70 % of physical memory."""
-    try:
-        total = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
-    except (ValueError, OSError, AttributeError):  # pragma: no cover - non-POSIX
-        total = 8 << 30
-    return int(0.7 * total)
+    """Bytes leakpath may use for one solve: what this process may still allocate (the least
+    of the cgroup and ulimit headroom and the available memory) times a safety fraction; see
+    :func:`leakpath._memory.memory_limit`."""
+    from ._memory import memory_limit
+
+    return memory_limit()
 
 
 def contact_modulus(E: float, nu: float) -> float:

@@ -82,7 +82,12 @@ parallel, so one single-threaded task per core is also the most efficient layout
 (``BrokenProcessPool``) loses only the unfinished tasks: they are resubmitted on a fresh
 pool; after ``retries + 1`` consecutive broken pools without a finished task the run stops
 with ``RuntimeError``. If the driver itself dies (SIGKILL, out of memory), a watchdog thread
-in each worker (POSIX) ends it within a second instead of leaving it orphaned.
+in each worker sees the end-of-file of a pipe whose write end only the driver held and ends
+the worker at once instead of leaving it orphaned. Workers, the fork server and the resource
+tracker do not hold the driver's standard output and error (they point at ``/dev/null``), so
+a caller reading the driver's output through a pipe is not kept waiting by them. The workers
+never run the calling program again: it may be a script (guarded or not), ``python -c`` or
+``python -`` (a generator defined in a script needs the usual ``__main__`` guard).
 
 ``executor=<dask.distributed.Client>`` or a scheduler address (``"tcp://host:8786"``; a
 Client is created and closed here): the same task function is submitted with
@@ -145,7 +150,7 @@ from typing import Any
 import numpy as np
 
 from . import __version__
-from .contact import SOLVERS
+from .contact import SOLVERS, contact_modulus
 from .surfaces import Surface
 from .sweep import _dumps, atomic_write_bytes, atomic_write_text, machine_info
 from .sweep import sweep as _sweep
@@ -704,23 +709,22 @@ def _run_task_dask(spec: _TaskSpec, threads: int | None) -> _TaskOutput:
     return _run_task(spec)
 
 
-def _watch_driver(driver_pid: int, interval: float) -> None:
+def _watch_driver(alive: Any) -> None:
     """Exit this worker as soon as the driver process is gone (never returns otherwise).
 
-    Workers come from a fork server, so their parent is not the driver: the driver is
-    probed by its process id instead.
+    ``alive`` is the read end of a pipe whose only write end the driver holds and never
+    writes to: the read end sees end-of-file when the driver dies, however it dies, and
+    unlike a probe of its process id it cannot mistake a killed driver that its own parent
+    has not reaped yet (a zombie) for a live one.
     """
-    while True:
-        time.sleep(interval)
-        try:
-            os.kill(driver_pid, 0)
-        except ProcessLookupError:
-            os._exit(1)
-        except OSError:  # e.g. PermissionError: the process exists
-            pass
+    try:
+        alive.poll(None)
+    except (OSError, EOFError):
+        pass
+    os._exit(1)
 
 
-def _init_worker(threads: int, driver_pid: int | None = None) -> None:
+def _init_worker(threads: int, alive: Any = None) -> None:
     """Process-pool initializer: limit rayon (and BLAS) threads before any task runs.
 
     rayon builds its global pool on first use and reads ``RAYON_NUM_THREADS`` then, so
@@ -728,21 +732,93 @@ def _init_worker(threads: int, driver_pid: int | None = None) -> None:
     Rust routine ran — takes effect. BLAS libraries read their variables when numpy is
     loaded; leakpath's hot loops do not use BLAS, so those are set for any child processes.
 
-    With ``driver_pid``, a daemon thread ends the worker within a quarter of a second of the
-    driver's death (a killed driver cannot shut its pool down; the workers would otherwise wait
-    for work forever).
+    The worker's standard output and error go to ``/dev/null``: a worker must not keep the
+    driver's (a pipe its caller may be reading to the end) open. Results and errors travel
+    back through the pool.
+
+    With ``alive`` (see :func:`_watch_driver`), a daemon thread ends the worker as soon as
+    the driver dies (a killed driver cannot shut its pool down; the workers would otherwise
+    wait for work forever).
     """
     for name in _THREAD_ENV:
         os.environ[name] = str(int(threads))
-    if driver_pid is not None and os.name == "posix":  # os.kill(pid, 0) is a probe on POSIX
+    _detach_stdio()
+    if alive is not None:
         import threading
 
         threading.Thread(
-            target=_watch_driver,
-            args=(driver_pid, 0.25),
-            name="leakpath-driver-watch",
-            daemon=True,
+            target=_watch_driver, args=(alive,), name="leakpath-driver-watch", daemon=True
         ).start()
+
+
+def _detach_stdio() -> None:
+    """Point file descriptors 1 and 2 of this process at ``/dev/null``."""
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            if stream is not None:
+                stream.flush()
+        except (OSError, ValueError):
+            pass
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    try:
+        for fd in (1, 2):
+            os.dup2(devnull, fd)
+    finally:
+        os.close(devnull)
+
+
+class _StartingChildren:
+    """While the pool starts its helper processes (fork server, resource tracker, workers):
+
+    * fds 1 and 2 point at ``/dev/null``, so none of them inherits the driver's standard
+      output or error — a killed driver's caller reading them through a pipe then sees
+      end-of-file at once;
+    * ``__main__`` hides its path, unless the generator is a function defined there:
+      ``spawn``/``forkserver`` children would otherwise run the calling program again as
+      their main module — which fails when it is not a file (``python -``, a piped script,
+      an interactive session) and starts the ensemble again in every worker when a script
+      lacks the ``if __name__ == "__main__"`` guard. The tasks need nothing else from it.
+    """
+
+    def __init__(self, keep_main: bool = False) -> None:
+        self.keep_main = keep_main
+
+    def __enter__(self) -> _StartingChildren:
+        self.saved: list[tuple[int, int]] = []
+        for stream in (sys.stdout, sys.stderr):
+            try:
+                if stream is not None:
+                    stream.flush()
+            except (OSError, ValueError):
+                pass
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        try:
+            for fd in (1, 2):
+                try:
+                    self.saved.append((fd, os.dup(fd)))
+                except OSError:
+                    continue
+                os.dup2(devnull, fd)
+        finally:
+            os.close(devnull)
+        self.main = sys.modules.get("__main__")
+        self.main_file = getattr(self.main, "__file__", None)
+        self.hidden = (
+            not self.keep_main
+            and self.main is not None
+            and self.main_file is not None
+            and getattr(self.main, "__spec__", None) is None
+        )
+        if self.hidden:
+            del self.main.__file__
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        if self.hidden:
+            self.main.__file__ = self.main_file
+        for fd, copy in self.saved:
+            os.dup2(copy, fd)
+            os.close(copy)
 
 
 # ============================================================================ file layout
@@ -771,14 +847,15 @@ def _task_done(out: Path, key: str, seed: int) -> bool:
 
 
 def _clean_stale_temporaries(out: Path) -> None:
-    tasks = out / "tasks"
-    if not tasks.is_dir():
-        return
-    for stale in tasks.glob("*/.*.tmp"):
-        try:
-            stale.unlink()
-        except OSError:
-            pass
+    """Remove the hidden temporaries of atomic writes cut short by a killed run: in the task
+    directories, ``figures/`` and ``DIR`` itself."""
+    patterns = ("tasks/*/.*.tmp", "figures/.*.tmp", ".*.tmp")
+    for pattern in patterns:
+        for stale in out.glob(pattern):
+            try:
+                stale.unlink()
+            except OSError:
+                pass
 
 
 def _parse_cell(text: str) -> Any:
@@ -890,6 +967,16 @@ class EnsembleResult:
     threshold_summary: dict[str, dict[str, Any]]
     run: dict[str, Any] | None = None
     figures: list[Path] = field(default_factory=list)
+
+    def __repr__(self) -> str:
+        # The aggregate and threshold tables have hundreds of rows: summarise them.
+        surfaces = sum(len(ps.seeds) for ps in self.param_sets)
+        return (
+            f"EnsembleResult(directory={str(self.directory)!r}, "
+            f"param_sets=[{', '.join(self.keys)}], surfaces={surfaces}, "
+            f"levels={self.identity.get('levels')}, aggregate_rows={len(self.aggregate)}, "
+            f"figures={len(self.figures)})"
+        )
 
     @property
     def keys(self) -> list[str]:
@@ -1248,20 +1335,43 @@ def _run_processes(
     """Local process pool; a broken pool is replaced and the unfinished tasks resubmitted."""
     ctx = _mp_context()
     pending = {(s.key, s.seed): s for s in specs}
+    # Workers watch the read end; only this process holds the write end (see _watch_driver).
+    alive_r, alive_w = ctx.Pipe(duplex=False)
+    try:
+        return _run_pools(ctx, pending, driver, workers, threads, retries, alive_r)
+    finally:
+        alive_r.close()
+        alive_w.close()
+
+
+def _run_pools(
+    ctx: Any,
+    pending: dict[tuple[str, int], _TaskSpec],
+    driver: _Driver,
+    workers: int,
+    threads: int,
+    retries: int,
+    alive: Any,
+) -> dict[str, Any]:
     restarts = 0
     stalls = 0
+    generator = next(iter(pending.values())).generator
+    keep_main = getattr(generator, "__module__", None) == "__main__"
     while pending:
-        pool = ProcessPoolExecutor(
-            max_workers=min(workers, len(pending)),
-            mp_context=ctx,
-            initializer=_init_worker,
-            initargs=(threads, os.getpid()),
-        )
+        # Worker processes start while the pool is built and tasks are submitted.
+        with _StartingChildren(keep_main):
+            pool = ProcessPoolExecutor(
+                max_workers=min(workers, len(pending)),
+                mp_context=ctx,
+                initializer=_init_worker,
+                initargs=(threads, alive),
+            )
         broken = False
         finished_here = 0
         clean = False
         try:
-            futures = {pool.submit(_run_task, spec): tid for tid, spec in pending.items()}
+            with _StartingChildren(keep_main):
+                futures = {pool.submit(_run_task, spec): tid for tid, spec in pending.items()}
             not_done = set(futures)
             while not_done:
                 done, not_done = wait(not_done, return_when=FIRST_COMPLETED)
@@ -1506,6 +1616,12 @@ def ensemble(
         raise ValueError(f"connectivity: must be 4 or 8, got {connectivity!r}")
     if boundary not in ("free", "periodic"):
         raise ValueError(f"boundary: must be 'free' or 'periodic', got {boundary!r}")
+    # The elastic constants are used only inside the tasks: check them here, before any
+    # worker starts or any file is written.
+    for name, value in (("E", E), ("nu", nu)):
+        if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
+            raise ValueError(f"{name}: must be a number, got {value!r}")
+    contact_modulus(E, nu)
     retries = _check_int("retries", retries, 0)
     if workers is not None:
         workers = _check_int("workers", workers, 1)

@@ -299,6 +299,36 @@ def save_figure(
     return paths
 
 
+def remove_stale_temporaries(directory: Path) -> list[Path]:
+    """Delete the hidden ``.<name>.<pid>.<token>.tmp`` files that atomic writes of a killed
+    process left in ``directory`` (those of live processes are kept). Returns those removed."""
+    removed = []
+    for tmp in directory.glob(".*.tmp"):
+        parts = tmp.name.split(".")
+        try:
+            pid = int(parts[-3])
+        except (IndexError, ValueError):
+            continue
+        if pid != os.getpid() and _process_alive(pid):
+            continue
+        try:
+            tmp.unlink()
+        except OSError:
+            continue
+        removed.append(tmp)
+    return removed
+
+
+def _process_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # exists, owned by someone else
+        return True
+    return True
+
+
 def save_paper_figures(
     result: SweepResult,
     outdir: str | os.PathLike[str],
@@ -324,6 +354,7 @@ def save_paper_figures(
             raise ValueError(f"levels_to_map: row indices must lie in 0…{n - 1}, got {k!r}")
     out = Path(outdir)
     out.mkdir(parents=True, exist_ok=True)
+    remove_stale_temporaries(out)
     paths: list[Path] = []
     paths += save_figure(
         figure_topography_moments(result), out / "fig1_topography_moments", formats, dpi

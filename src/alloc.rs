@@ -1,0 +1,134 @@
+//! Fallible allocation of the large buffers.
+//!
+//! A failed `vec![0.0; n]` aborts the process ("memory allocation of … bytes failed"), which
+//! takes the user's Python session with it. Every buffer whose size grows with the grid or
+//! the contact set is allocated here instead, and a refusal by the allocator (an address-space
+//! or cgroup limit, or no memory left) becomes [`Error::TooLarge`] with what was being
+//! allocated. Sizes come from user input, so the byte count is computed with checked
+//! arithmetic first: an impossible size is refused the same way, before asking the allocator.
+
+use std::alloc::{alloc_zeroed, Layout};
+
+use rustfft::num_complex::Complex64;
+
+use crate::error::{Error, Result};
+
+/// Element types whose all-zero bit pattern is the value zero, so a zeroed allocation is a
+/// valid, initialised buffer.
+///
+/// # Safety
+/// Implement only for types for which all-zero bytes are a valid value.
+pub unsafe trait Zeroed: Copy {}
+// SAFETY: all-zero bytes are 0.0, 0, false and 0 + 0i respectively.
+unsafe impl Zeroed for f64 {}
+unsafe impl Zeroed for u32 {}
+unsafe impl Zeroed for u64 {}
+unsafe impl Zeroed for usize {}
+unsafe impl Zeroed for bool {}
+unsafe impl Zeroed for Complex64 {}
+
+/// Bytes of `n` values of `T`, or `Error::TooLarge` when the count overflows.
+pub fn bytes_of<T>(n: usize, what: &str) -> Result<u64> {
+    n.checked_mul(std::mem::size_of::<T>())
+        .filter(|&b| b <= isize::MAX as usize)
+        .map(|b| b as u64)
+        .ok_or_else(|| overflow(what))
+}
+
+/// `a · b`, or `Error::TooLarge` naming `what` when it overflows (grid sizes from user input).
+pub fn checked_cells(a: usize, b: usize, what: &str) -> Result<usize> {
+    a.checked_mul(b).ok_or_else(|| overflow(what))
+}
+
+fn overflow(what: &str) -> Error {
+    Error::TooLarge {
+        bytes: u64::MAX,
+        limit: isize::MAX as u64,
+        what: format!("{what} (its size overflows the address space)"),
+    }
+}
+
+/// A zero-filled `Vec` of `n` values, or `Error::TooLarge` when the allocator refuses.
+/// Zeroed pages come straight from the kernel (`calloc`), as with `vec![0.0; n]`.
+pub fn try_zeroed<T: Zeroed>(n: usize, what: &str) -> Result<Vec<T>> {
+    let bytes = bytes_of::<T>(n, what)?;
+    if n == 0 || std::mem::size_of::<T>() == 0 {
+        return Ok(Vec::new());
+    }
+    let layout = Layout::array::<T>(n).map_err(|_| overflow(what))?;
+    // SAFETY: the layout has a non-zero size; a non-null result is an allocation of `n`
+    // zeroed `T` with `T`'s alignment from the global allocator, which is what `Vec` frees,
+    // and all-zero bytes are a valid `T` (`Zeroed`).
+    unsafe {
+        let ptr = alloc_zeroed(layout) as *mut T;
+        if ptr.is_null() {
+            return Err(refused(bytes, what));
+        }
+        Ok(Vec::from_raw_parts(ptr, n, n))
+    }
+}
+
+/// A `Vec` of `n` copies of `value`, or `Error::TooLarge` when the allocator refuses.
+pub fn try_filled<T: Clone>(n: usize, value: T, what: &str) -> Result<Vec<T>> {
+    let mut v = try_with_capacity(n, what)?;
+    v.resize(n, value);
+    Ok(v)
+}
+
+/// An empty `Vec` with room for exactly `n` values, or `Error::TooLarge`.
+pub fn try_with_capacity<T>(n: usize, what: &str) -> Result<Vec<T>> {
+    let bytes = bytes_of::<T>(n, what)?;
+    let mut v = Vec::new();
+    v.try_reserve_exact(n).map_err(|_| refused(bytes, what))?;
+    Ok(v)
+}
+
+/// Grows `v` to hold at least `n` values in total, or `Error::TooLarge`.
+pub fn try_reserve_total<T>(v: &mut Vec<T>, n: usize, what: &str) -> Result<()> {
+    let extra = n.saturating_sub(v.len());
+    let bytes = bytes_of::<T>(n, what)?;
+    v.try_reserve_exact(extra).map_err(|_| refused(bytes, what))
+}
+
+/// The error for an allocation the system refused: `limit` 0 says no configured limit was
+/// exceeded, the operating system itself had no room (see [`Error`]'s message).
+pub fn refused(bytes: u64, what: &str) -> Error {
+    Error::TooLarge {
+        bytes,
+        limit: 0,
+        what: what.to_string(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn zeroed_buffers_are_zero() {
+        let v: Vec<f64> = try_zeroed(1000, "test").unwrap();
+        assert_eq!(v.len(), 1000);
+        assert!(v.iter().all(|&x| x == 0.0));
+        let c: Vec<Complex64> = try_zeroed(10, "test").unwrap();
+        assert!(c.iter().all(|z| z.re == 0.0 && z.im == 0.0));
+        let e: Vec<f64> = try_zeroed(0, "test").unwrap();
+        assert!(e.is_empty());
+    }
+
+    #[test]
+    fn impossible_sizes_are_refused_not_aborted() {
+        // Overflowing byte counts, and a representable one no system can provide (2 EiB).
+        for n in [usize::MAX, 1 << 62, (1usize << 61) + 3, 1 << 58] {
+            match try_zeroed::<f64>(n, "a huge buffer") {
+                Err(Error::TooLarge { what, .. }) => assert!(what.contains("a huge buffer")),
+                other => panic!("expected TooLarge, got {:?}", other.map(|v| v.len())),
+            }
+            assert!(matches!(
+                try_filled(n, 0u32, "x"),
+                Err(Error::TooLarge { .. })
+            ));
+        }
+        assert!(checked_cells(1 << 40, 1 << 40, "grid").is_err());
+        assert_eq!(checked_cells(3, 4, "grid").unwrap(), 12);
+    }
+}
