@@ -109,7 +109,8 @@
 //! kkt = max( −min_i g_i,  max_{i ∈ I_c} |g_i|,  Σ p_i |g_i| / Σ p_i ) / h_s
 //! ```
 //!
-//! (the last term is dropped when `Σ p = 0`). The solver stops when `kkt ≤ tol`, default
+//! (the last term is dropped when `Σ p = 0`; the scale is `max(h_s, Δ)` in displacement
+//! control, which differs from `h_s` only past the height range). The solver stops when `kkt ≤ tol`, default
 //! [`DEFAULT_TOL`] `= 1e-12`: reachable in double precision (round-off of `u` is
 //! `~1e-15 · max |u|`) at a few CG iterations per decade. For a flat surface (`h_s = 0`) the
 //! scale is `Δ` (displacement control) or `p̄ · C_00` (load control), `C_00 = 4 dx ln(1+√2)/(π E*)`.
@@ -1201,7 +1202,12 @@ fn run(op: &Operator, problem: &Problem, control: Control, opts: &Options) -> Re
         Control::MeanPressure(m) => Mode::Load(m * n as f64),
     };
     let scale = if hs > 0.0 {
-        hs
+        // A free patch pressed far past its height range: gaps and displacements are of the
+        // order of Δ, so round-off is relative to Δ, not h_s.
+        match control {
+            Control::Approach(d) => hs.max(d),
+            Control::MeanPressure(_) => hs,
+        }
     } else {
         match control {
             Control::Approach(d) if d > 0.0 => d,

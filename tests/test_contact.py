@@ -171,7 +171,7 @@ def test_zero_approach_is_zero_pressure():
     [
         ({"approach": -0.1}, "approach"),
         ({"approach": float("nan")}, "approach"),
-        ({"approach": 10.0}, "approach"),
+        ({"approach": 10.0, "boundary": "periodic"}, "approach"),
         ({"E": 0.0}, "E"),
         ({"E": -1.0}, "E"),
         ({"nu": 0.6}, "nu"),
@@ -188,6 +188,19 @@ def test_bad_arguments_name_themselves(kwargs, name):
     approach = args.pop("approach")
     with pytest.raises(ValueError, match=rf"^{name}\b"):
         solve(s, approach, **args)
+
+
+def test_free_boundary_presses_past_the_height_range():
+    """A free patch is only partly in contact at Δ = h_s; deeper approaches keep adding
+    contact and are solved exactly (Polonsky–Keer and the active set agree)."""
+    s = leakpath.rmd(5, 2.1, seed=1)
+    hs = s.height_range
+    at_hs = solve(s, hs)
+    deeper = solve(s, 1.5 * hs, solver="polonsky-keer")
+    exact = solve(s, 1.5 * hs, solver="active-set")
+    assert at_hs.contact_fraction < deeper.contact_fraction < 1.0
+    assert np.array_equal(deeper.contact, exact.contact)
+    assert deeper.kkt <= 1e-12 and exact.kkt <= 1e-12
 
 
 def test_bad_heights():

@@ -400,7 +400,7 @@ def _api_cases(small: Surface) -> list[tuple[str, str, Any, Any]]:
         "ContactProblem.nu": lambda v: ContactProblem(small, nu=v),
         "ContactProblem.memory_limit": lambda v: ContactProblem(small, memory_limit=v),
         "solve.dx": lambda v: solve(h, 0.1, dx=v),
-        "solve.approach": lambda v: solve(small, v),
+        "solve.approach": lambda v: solve(small, v, boundary="periodic"),
         "solve.tol": lambda v: solve(small, 0.1 * hs, tol=v),
         "solve.max_iter": lambda v: solve(small, 0.1 * hs, max_iter=v),
         "sweep.levels": lambda v: sweep(small, levels=v),

@@ -169,7 +169,7 @@ def test_explicit_approaches_and_modulus(surface, result):
     [
         ({"approaches": [0.0, 0.2, 0.1]}, "approaches"),
         ({"approaches": [-0.1, 0.2]}, "approaches"),
-        ({"approaches": [0.0, 1e9]}, "approaches"),
+        ({"approaches": [0.0, 1e9], "boundary": "periodic"}, "approaches"),
         ({"approaches": []}, "approaches"),
         ({"levels": 0}, "levels"),
         ({"axis": 2}, "axis"),

@@ -18,7 +18,6 @@ in ``docs/conventions.md``.
 from __future__ import annotations
 
 import math
-import os
 import sys
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -293,8 +292,9 @@ class ContactProblem:
 
         ``warm_start``: ``None``/``False`` start cold (``p = 0``, the paper); ``True`` from
         this problem's previous solve; a :class:`ContactState` from that state (Polonsky–Keer
-        starts from its pressure, the exact solvers from its contact set); a boolean contact
-        mask of the surface's shape (exact solvers: from that set; Polonsky–Keer: cold).
+        starts from its pressure, the exact solvers from its contact set); a float pressure
+        field of the surface's shape likewise; a boolean contact mask (exact solvers: from
+        that set; Polonsky–Keer: cold).
         """
         _validate.choice("solver", solver, SOLVERS)
         tol = DEFAULT_TOL if tol is None else _validate.positive("tol", tol)
@@ -344,11 +344,14 @@ class ContactProblem:
                     argument="warm_start",
                 )
             return
-        mask = np.asarray(warm_start)
-        if mask.shape != self._h.shape or mask.dtype != bool:
+        arr = np.asarray(warm_start)
+        ok = arr.shape == self._h.shape and (
+            arr.dtype == bool or (arr.dtype.kind == "f" and bool(np.all(np.isfinite(arr))))
+        )
+        if not ok:
             raise InvalidArgumentError(
-                "warm_start: expected True/False, a ContactState or a boolean contact mask of "
-                f"shape {self._h.shape}",
+                "warm_start: expected True/False, a ContactState, a boolean contact mask or a "
+                f"finite float pressure field of shape {self._h.shape}",
                 argument="warm_start",
             )
 
@@ -357,8 +360,12 @@ class ContactProblem:
             return "cold", None
         if warm_start is True:
             return "previous", None
-        mask = warm_start.contact if isinstance(warm_start, ContactState) else warm_start
-        return "set", np.flatnonzero(np.asarray(mask)).astype(np.int64)
+        if isinstance(warm_start, ContactState):
+            mask = warm_start.contact
+        else:
+            arr = np.asarray(warm_start)
+            mask = arr if arr.dtype == bool else arr > 0
+        return "set", np.flatnonzero(mask).astype(np.int64)
 
     def _solve_pk(
         self,
@@ -373,6 +380,10 @@ class ContactProblem:
             init = self._last.pressure
         elif isinstance(warm_start, ContactState):
             init = warm_start.pressure
+        elif warm_start is not None and not isinstance(warm_start, (bool, np.bool_)):
+            arr = np.asarray(warm_start)
+            if arr.dtype.kind == "f":
+                init = np.ascontiguousarray(arr, dtype=np.float64)
         out = _core.solve_polonsky_keer(
             self._h,
             self.surface.dx,

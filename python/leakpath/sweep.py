@@ -72,6 +72,7 @@ them again; a different sweep in that directory is refused (``ValueError``).
 from __future__ import annotations
 
 import base64
+import binascii
 import hashlib
 import io
 import json
@@ -82,6 +83,7 @@ import secrets
 import struct
 import sys
 import time
+import warnings
 import zlib
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -93,7 +95,7 @@ import numpy as np
 import numpy.typing as npt
 
 from . import __version__, _validate
-from .contact import SOLVERS, ContactProblem, ContactState
+from .contact import AUTO_ACTIVE_SET_MAX_POINTS, SOLVERS, ContactProblem, ContactState
 from .errors import InvalidArgumentError
 from .moments import nayak_moments
 from .surfaces import Surface
@@ -136,6 +138,7 @@ _COLUMN_SPEC: tuple[tuple[str, str], ...] = (
     ("contact_area", "f"),
     ("load", "f"),
     ("mean_pressure", "f"),
+    ("mean_pressure_star", "f"),
     ("free_volume", "f"),
     ("free_volume_star", "f"),
     ("mean_gap", "f"),
@@ -171,6 +174,7 @@ CSV_COLUMNS: tuple[str, ...] = COLUMNS
 _TYPES: dict[str, str] = dict(_COLUMN_SPEC)
 _STAR_COLUMNS = (
     "approach_star",
+    "mean_pressure_star",
     "free_volume_star",
     "mean_gap_star",
     "V_pg_star",
@@ -368,6 +372,9 @@ class SweepResult:
         from a checkpoint).
     resumed : list of int
         Levels loaded from a checkpoint instead of computed in this call.
+    recomputed : list of int
+        Levels whose checkpoint record failed its integrity check (another run's, edited,
+        truncated) and were computed again.
     fields : dict or None
         With ``keep_fields``: ``pressure``, ``gap`` (float64) and ``labels`` (int32, cluster
         labels for the chosen axis), each ``(levels, ny, nx)``; otherwise ``None``.
@@ -379,6 +386,7 @@ class SweepResult:
     reference: dict[str, float]
     seconds: list[float]
     resumed: list[int] = field(default_factory=list)
+    recomputed: list[int] = field(default_factory=list)
     fields: dict[str, np.ndarray] | None = None
     total_seconds: float = 0.0
     _masks: list[str] = field(default_factory=list, repr=False)
@@ -549,12 +557,23 @@ def _resolve_approaches(problem: ContactProblem, levels: int, approaches: Any) -
         raise InvalidArgumentError(f"approaches: must be ≥ 0, got min {arr.min()!r}")
     if np.any(np.diff(arr) <= 0):
         raise InvalidArgumentError("approaches: must be strictly increasing")
-    if arr[-1] > limit * (1 + 1e-12):
-        what = "max h − mean h (periodic full contact)" if problem.boundary == "periodic" else "h_s"
+    if problem.boundary == "periodic" and arr[-1] > limit * (1 + 1e-12):
         raise InvalidArgumentError(
-            f"approaches: {arr[-1]!r} exceeds the largest approach {what} = {limit!r}"
+            f"approaches: {arr[-1]!r} exceeds full contact of a periodic surface, "
+            f"max h − mean h = {limit!r}; give approaches ≤ that"
         )
     return [float(a) for a in arr]
+
+
+def _resolve_mean_pressures(mean_pressures: Any) -> list[float]:
+    arr = _validate.real_array("mean_pressures", mean_pressures, ndim=1, finite=False)
+    if arr.size == 0:
+        raise InvalidArgumentError("mean_pressures: must be a non-empty 1-D sequence of numbers")
+    if not (np.all(np.isfinite(arr)) and np.all(arr > 0)):
+        raise InvalidArgumentError("mean_pressures: every value must be finite and > 0")
+    if np.any(np.diff(arr) <= 0):
+        raise InvalidArgumentError("mean_pressures: must be strictly increasing")
+    return [float(v) for v in arr]
 
 
 def _check_axis(axis: Any) -> Any:
@@ -575,19 +594,25 @@ class _Level:
     mask: str
     classes: str
     fields: dict[str, np.ndarray] | None = None
+    #: The level's pressure field (float64, packed): the warm start of the next level, kept
+    #: in checkpoints so that a resumed warm sweep repeats the same solves bit for bit.
+    pressure: str | None = None
 
 
 def _solve_accepted(
     problem: ContactProblem,
-    approach: float,
+    level: tuple[str, float],
     solver: str,
     warm: bool | np.ndarray,
 ) -> tuple[ContactState, int, int]:
-    """Solve, and re-solve exactly from the returned contact set while ``kkt > KKT_ACCEPT``.
+    """Solve one level (``("approach", Δ)`` or ``("mean_pressure", p̄)``), and re-solve
+    exactly from the returned contact set while ``kkt > KKT_ACCEPT``.
 
     Returns the state, the iterations summed over the solves and the number of re-solves.
     """
-    state = problem.solve(approach, solver=solver, warm_start=warm)  # type: ignore[arg-type]
+    kind, value = level
+    state = problem.solve(**{kind: value}, solver=solver, warm_start=warm)  # type: ignore[arg-type]
+    approach = state.approach
     iterations = state.iterations
     restarts = 0
     while not (state.kkt <= KKT_ACCEPT):
@@ -597,7 +622,7 @@ def _solve_accepted(
                 f"approach {approach!r} (certificate {state.kkt:.3g} after {restarts} "
                 "exact restarts)"
             )
-        restart_solver = "active-set" if solver == "polonsky-keer" else solver
+        restart_solver = "active-set" if solver in ("polonsky-keer", "auto") else solver
         state = problem.solve(approach, solver=restart_solver, warm_start=state.contact)  # type: ignore[arg-type]
         iterations += state.iterations
         restarts += 1
@@ -623,6 +648,7 @@ def _analyse(
     connectivity: int,
     keep_fields: bool,
     t_start: float,
+    keep_pressure: bool = False,
 ) -> _Level:
     """Row, masks and fields of a solved level (``t_start``: when its solve began)."""
     p0 = state.percolation(axis=0, connectivity=connectivity)
@@ -666,6 +692,7 @@ def _analyse(
         mask=_pack_mask(state.contact),
         classes=_pack(classes),
         fields=fields,
+        pressure=_pack(np.asarray(state.pressure, dtype="<f8")) if keep_pressure else None,
     )
 
 
@@ -683,13 +710,24 @@ class CheckpointMismatch(ValueError):
 
 
 class _Checkpoint:
-    """A directory of finished levels: ``manifest.json`` + ``level_KKKK.json`` (+ ``.npz``)."""
+    """A directory of finished levels: ``manifest.json`` + ``level_KKKK.json`` (+ ``.npz``).
+
+    Every level record is bound to its run and to its own content: it carries the SHA-256 of
+    the manifest (surface hash, parameters), its level index, and the SHA-256 of its own
+    canonical JSON (and of its ``.npz`` fields file). A record that fails any check — another
+    run's, edited, truncated, non-finite where a number is required — is not used: the level
+    is computed again, and :attr:`recomputed` names it with the reason.
+    """
 
     def __init__(self, directory: PathLike, manifest: dict[str, Any], keep_fields: bool):
         self.dir = Path(directory)
         self.keep_fields = keep_fields
+        self.recomputed: list[tuple[int, str]] = []
         if self.dir.exists() and not self.dir.is_dir():
-            raise ValueError(f"checkpoint_dir: {str(self.dir)!r} exists and is not a directory")
+            raise InvalidArgumentError(
+                f"checkpoint_dir: {str(self.dir)!r} exists and is not a directory",
+                argument="checkpoint_dir",
+            )
         self.dir.mkdir(parents=True, exist_ok=True)
         for stale in self.dir.glob(".*.tmp"):  # left by a run killed while writing
             try:
@@ -697,18 +735,21 @@ class _Checkpoint:
             except OSError:
                 pass
         path = self.dir / "manifest.json"
-        wanted = json.loads(_dumps(manifest))
+        text = _dumps(manifest)
+        wanted = json.loads(text)
+        self.run = hashlib.sha256(text.encode("utf-8")).hexdigest()
         if path.exists():
             try:
                 found = json.loads(path.read_text(encoding="utf-8"))
             except (OSError, ValueError) as exc:
-                raise ValueError(
-                    f"checkpoint_dir: cannot read {str(path)!r} ({exc}); delete it to restart"
+                raise InvalidArgumentError(
+                    f"checkpoint_dir: cannot read {str(path)!r} ({exc}); delete it to restart",
+                    argument="checkpoint_dir",
                 ) from None
             for key in _differences(found, wanted):
                 raise CheckpointMismatch(self.dir, key)
         else:
-            atomic_write_text(path, _dumps(manifest))
+            atomic_write_text(path, text)
 
     def _json(self, k: int) -> Path:
         return self.dir / f"level_{k:04d}.json"
@@ -716,29 +757,69 @@ class _Checkpoint:
     def _npz(self, k: int) -> Path:
         return self.dir / f"level_{k:04d}.npz"
 
-    def load(self, k: int, shape: tuple[int, int]) -> _Level | None:
+    def load(self, k: int, shape: tuple[int, int], need_pressure: bool) -> _Level | None:
+        """The checked level ``k``, or ``None`` (absent, or failed a check: see
+        :attr:`recomputed`)."""
         path = self._json(k)
-        if not path.exists() or (self.keep_fields and not self._npz(k).exists()):
+        if not path.exists():
             return None
         try:
-            data = json.loads(path.read_text(encoding="utf-8"))
-        except (OSError, ValueError):
-            return None  # unreadable: compute the level again
-        if data.get("k") != k or list(data.get("shape", [])) != list(shape):
+            return self._load_checked(k, shape, need_pressure)
+        except _BadCheckpoint as exc:
+            self.recomputed.append((k, str(exc)))
             return None
-        row = {c: _coerce_cell(c, data["row"][c]) for c in _LEVEL_COLUMNS}
+
+    def _load_checked(self, k: int, shape: tuple[int, int], need_pressure: bool) -> _Level:
+        try:
+            data = json.loads(self._json(k).read_text(encoding="utf-8"))
+        except (OSError, ValueError) as exc:
+            raise _BadCheckpoint(f"unreadable ({exc.__class__.__name__})") from None
+        if not isinstance(data, dict):
+            raise _BadCheckpoint("not a level record")
+        digest = data.pop("sha256", None)
+        if digest != _record_digest(data):
+            raise _BadCheckpoint("its content does not match its checksum")
+        if data.get("run") != self.run:
+            raise _BadCheckpoint("it belongs to another run (surface or parameters differ)")
+        if data.get("k") != k or list(data.get("shape", [])) != list(shape):
+            raise _BadCheckpoint("level index or shape differs")
+        try:
+            row = {c: _coerce_cell(c, data["row"][c]) for c in _LEVEL_COLUMNS}
+            seconds = float(data["seconds"])
+            mask, classes = str(data["mask"]), str(data["classes"])
+            _unpack_mask(mask, shape)
+            _unpack(classes, np.int8, shape)
+            pressure = data.get("pressure")
+            if need_pressure:
+                if not isinstance(pressure, str):
+                    raise _BadCheckpoint("no pressure field to warm-start the next level")
+                if not np.all(np.isfinite(_unpack(pressure, "<f8", shape))):
+                    raise _BadCheckpoint("non-finite pressure")
+        except _BadCheckpoint:
+            raise
+        except (KeyError, TypeError, ValueError, zlib.error, binascii.Error) as exc:
+            raise _BadCheckpoint(f"malformed ({exc.__class__.__name__}: {exc})") from None
+        for c in _LEVEL_COLUMNS:
+            v = row[c]
+            if _TYPES[c] == "f" and c != "kkt" and not math.isfinite(v):
+                raise _BadCheckpoint(f"{c} is not finite")
+            if _TYPES[c] == "i" and v < 0:
+                raise _BadCheckpoint(f"{c} is negative")
         fields = None
         if self.keep_fields:
-            with np.load(self._npz(k), allow_pickle=False) as z:
+            try:
+                raw = self._npz(k).read_bytes()
+            except OSError:
+                raise _BadCheckpoint("its fields file is missing") from None
+            if hashlib.sha256(raw).hexdigest() != data.get("fields_sha256"):
+                raise _BadCheckpoint("its fields file does not match its checksum")
+            with np.load(io.BytesIO(raw), allow_pickle=False) as z:
                 fields = {name: z[name] for name in ("pressure", "gap", "labels")}
-        return _Level(row, float(data["seconds"]), data["mask"], data["classes"], fields)
+        return _Level(row, seconds, mask, classes, fields, pressure)
 
     def save(self, k: int, level: _Level, shape: tuple[int, int]) -> None:
-        if level.fields is not None:
-            buf = io.BytesIO()
-            np.savez_compressed(buf, **level.fields)
-            atomic_write_bytes(self._npz(k), buf.getvalue())
-        record = {
+        record: dict[str, Any] = {
+            "run": self.run,
             "k": k,
             "shape": list(shape),
             "row": {c: level.row[c] for c in _LEVEL_COLUMNS},
@@ -746,7 +827,28 @@ class _Checkpoint:
             "mask": level.mask,
             "classes": level.classes,
         }
+        if level.pressure is not None:
+            record["pressure"] = level.pressure
+        if level.fields is not None:
+            buf = io.BytesIO()
+            np.savez_compressed(buf, **level.fields)
+            raw = buf.getvalue()
+            atomic_write_bytes(self._npz(k), raw)
+            record["fields_sha256"] = hashlib.sha256(raw).hexdigest()
+        record = json.loads(_dumps(record))  # the JSON form that is hashed and read back
+        record["sha256"] = _record_digest(record)
         atomic_write_text(self._json(k), _dumps(record))
+
+
+class _BadCheckpoint(Exception):
+    """A level record that must not be used (the message says why)."""
+
+
+def _record_digest(record: Mapping[str, Any]) -> str:
+    """SHA-256 of a record's canonical JSON (sorted keys, no ``sha256`` entry)."""
+    body = {k: v for k, v in record.items() if k != "sha256"}
+    text = json.dumps(body, sort_keys=True, allow_nan=False, ensure_ascii=False)
+    return hashlib.sha256(text.encode("utf-8")).hexdigest()
 
 
 def _differences(found: Any, wanted: Any, prefix: str = "") -> list[str]:
@@ -767,6 +869,7 @@ def _ratio(a: float, b: float) -> float:
 def _finish_row(row: dict[str, Any], ref: Mapping[str, float], area: float) -> dict[str, Any]:
     out = dict(row)
     out["approach_star"] = _ratio(row["approach"], ref["h_s"])
+    out["mean_pressure_star"] = _ratio(row["mean_pressure"], ref["e_star"])
     out["free_volume_star"] = _ratio(row["free_volume"], area * ref["sigma"])
     out["mean_gap_star"] = _ratio(row["mean_gap"], ref["mean_gap"])
     out["V_pg_star"] = _ratio(row["V_pg"], ref["V_pg"])
@@ -780,6 +883,7 @@ def sweep(
     *,
     levels: int = 20,
     approaches: Sequence[float] | np.ndarray | None = None,
+    mean_pressures: Sequence[float] | np.ndarray | None = None,
     solver: str = "auto",
     warm_start: bool = True,
     axis: int | str = 0,
@@ -801,13 +905,20 @@ def sweep(
         Number of equal steps: ``Δ_k = k·Δ_max/levels``, ``k = 0 … levels``, with
         ``Δ_max = h_s`` (free) or ``max h − mean h`` (periodic). Ignored with ``approaches``.
     approaches : sequence of float, optional
-        Explicit approaches [length]: strictly increasing, ``≥ 0``, ``≤`` the largest
-        approach (:attr:`ContactProblem.max_approach`).
+        Explicit approaches [length]: strictly increasing, ``≥ 0`` (periodic: ``≤`` full
+        contact, :attr:`ContactProblem.max_approach`).
+    mean_pressures : sequence of float, optional
+        Load control instead: strictly increasing mean pressures ``p̄ = F/A0 > 0`` [E's
+        unit], one row each; the approach of each row is then the solver's output. The seal
+        engineer's curve against nominal pressure (``mean_pressure_star = p̄/E*``).
     solver : str
-        ``"auto"`` (Polonsky–Keer, then an exact active-set finish), ``"active-set"``,
-        ``"lawson-hanson"`` (the paper's one-point-per-iteration algorithm) or ``"polonsky-keer"``.
+        ``"auto"`` (default: Polonsky–Keer above a few thousand points, the exact active set
+        below; see :meth:`ContactProblem.solve`), ``"polonsky-keer"``, ``"active-set"`` or
+        ``"lawson-hanson"`` (the paper's one-point-per-iteration algorithm).
     warm_start : bool
-        Start level ``k`` from the contact mask of level ``k − 1`` (default) or from ``p = 0``.
+        Start level ``k`` from level ``k − 1`` (default: Polonsky–Keer from its pressure
+        field, the exact solvers from its contact set), or every level from ``p = 0``
+        (``False``, the paper's "without warm starting").
     axis : 0, 1, "either" or "both"
         Flow direction for ``V_pg``/``V_pg_star`` and the maps (both axes are always
         tabulated in ``*_axis0``/``*_axis1``).
@@ -855,13 +966,35 @@ def sweep(
     axis = _check_axis(axis)
     connectivity = _check_connectivity(connectivity)
     problem = ContactProblem(surface, E=E, nu=nu, boundary=boundary)  # type: ignore[arg-type]
-    approach_list = _resolve_approaches(problem, n_levels, approaches)
+    if approaches is not None and mean_pressures is not None:
+        raise InvalidArgumentError(
+            "mean_pressures: give approaches= or mean_pressures=, not both",
+            argument="mean_pressures",
+        )
+    if mean_pressures is not None:
+        pressure_list = _resolve_mean_pressures(mean_pressures)
+        level_list = [("mean_pressure", v) for v in pressure_list]
+        approach_list = None
+    else:
+        approach_list = _resolve_approaches(problem, n_levels, approaches)
+        level_list = [("approach", v) for v in approach_list]
+        pressure_list = None
     run_solver = solver
+    # Polonsky–Keer warm-starts from the previous pressure field, which checkpoints keep.
+    uses_pk = solver == "polonsky-keer" or (
+        solver == "auto" and surface.heights.size > AUTO_ACTIVE_SET_MAX_POINTS
+    )
+    keep_pressure = bool(warm_start) and (uses_pk or mean_pressures is not None)
     t_total = time.perf_counter()
 
     parameters: dict[str, Any] = {
-        "levels": len(approach_list) - 1 if approaches is None else None,
+        "levels": (
+            len(approach_list) - 1
+            if approach_list is not None and approaches is None
+            else None
+        ),
         "approaches": approach_list,
+        "mean_pressures": pressure_list,
         "solver": solver,
         "warm_start": bool(warm_start),
         "axis": axis,
@@ -879,6 +1012,7 @@ def sweep(
     ref_mom = nayak_moments(surface.heights, surface.dx)
     reference = {
         "h_s": surface.height_range,
+        "e_star": problem.e_star,
         "A0": surface.nominal_area,
         "sigma": math.sqrt(ref_mom.m0),
         "free_volume": ref_state.free_volume,
@@ -907,22 +1041,29 @@ def sweep(
         from tqdm import tqdm
 
         bar = tqdm(
-            total=len(approach_list), desc="sweep", unit="level", file=sys.stderr, leave=False
+            total=len(level_list), desc="sweep", unit="level", file=sys.stderr, leave=False
         )
     shape = surface.shape
     done: list[_Level] = []
     resumed: list[int] = []
     try:
-        for k, approach in enumerate(approach_list):
-            level = checkpoint.load(k, shape) if checkpoint is not None else None
+        for k, target in enumerate(level_list):
+            level = None
+            if checkpoint is not None:
+                level = checkpoint.load(k, shape, need_pressure=keep_pressure)
             if level is not None:
                 resumed.append(k)
             else:
                 warm: bool | np.ndarray = False
                 if warm_start and done:
-                    warm = _unpack_mask(done[-1].mask, shape)
+                    prev = done[-1]
+                    warm = (
+                        _unpack(prev.pressure, "<f8", shape)
+                        if prev.pressure is not None
+                        else _unpack_mask(prev.mask, shape)
+                    )
                 t0 = time.perf_counter()
-                state, iterations, restarts = _solve_accepted(problem, approach, run_solver, warm)
+                state, iterations, restarts = _solve_accepted(problem, target, run_solver, warm)
                 level = _analyse(
                     k,
                     state,
@@ -932,6 +1073,7 @@ def sweep(
                     connectivity=connectivity,
                     keep_fields=keep_fields,
                     t_start=t0,
+                    keep_pressure=keep_pressure,
                 )
                 if checkpoint is not None:
                     checkpoint.save(k, level, shape)
@@ -950,6 +1092,13 @@ def sweep(
             name: np.stack([lv.fields[name] for lv in done])  # type: ignore[index]
             for name in ("pressure", "gap", "labels")
         }
+    if checkpoint is not None and checkpoint.recomputed:
+        warnings.warn(
+            "checkpoint_dir: recomputed "
+            + "; ".join(f"level {k} ({why})" for k, why in checkpoint.recomputed)
+            + " — their records failed the integrity check and were not used",
+            stacklevel=2,
+        )
     return SweepResult(
         rows=rows,
         parameters=parameters,
@@ -957,6 +1106,7 @@ def sweep(
         reference=reference,
         seconds=[lv.seconds for lv in done],
         resumed=resumed,
+        recomputed=[k for k, _ in checkpoint.recomputed] if checkpoint is not None else [],
         fields=fields,
         total_seconds=time.perf_counter() - t_total,
         _masks=[lv.mask for lv in done],
