@@ -433,6 +433,7 @@ def _run_sweep(
     nu: float = 0.0,
     connectivity: int = 4,
     keep_fields: bool = False,
+    mean_pressures: Sequence[float] | None = None,
     argv: Sequence[str] | None = None,
 ) -> int:
     """Run a sweep into ``args.out`` and print its summary (table or JSON)."""
@@ -452,6 +453,7 @@ def _run_sweep(
         result = sweep(
             surface,
             levels=levels,
+            mean_pressures=mean_pressures,
             solver=args.solver,
             warm_start=warm_start,
             axis=axis,
@@ -538,6 +540,26 @@ def _add_sweep_output_arguments(p: argparse.ArgumentParser, default_out: str) ->
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
 
 
+_SOLVER_HELP = (
+    "contact solver: auto (default; Polonsky–Keer with an FFT preconditioner on grids above "
+    "48 x 48 points, the exact active set below: the same unique minimiser, KKT certificate "
+    "<= 1e-12 h_s), polonsky-keer, active-set, or lawson-hanson (the paper's algorithm "
+    "itself, slow)"
+)
+
+
+def _pressure_list(text: str) -> list[float]:
+    try:
+        values = [float(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected comma-separated numbers such as 0.001,0.01, got {text!r}"
+        ) from None
+    if not values:
+        raise argparse.ArgumentTypeError("expected at least one mean pressure")
+    return values
+
+
 def _solver_arg(p: argparse.ArgumentParser, help_text: str) -> None:
     from .contact import SOLVERS
 
@@ -571,7 +593,7 @@ def _cmd_paper(args: argparse.Namespace) -> int:
         "rough surfaces in contact"
     )
     n = 2 ** setup["m"] + 1
-    mode = "warm start from the previous level" if args.warm_start else "cold (p = 0) per level"
+    mode = "cold (p = 0) per level" if args.cold else "warm start from the previous level"
     description = (
         f"leakpath paper: RMD surface D = {setup['D']}, m = {setup['m']} ({n} x {n}), side "
         f"{setup['length']} mm, seed {args.seed}; lengths in mm, pressures in units of E "
@@ -583,7 +605,7 @@ def _cmd_paper(args: argparse.Namespace) -> int:
         args,
         command="paper",
         description=description,
-        warm_start=args.warm_start,
+        warm_start=not args.cold,
         levels=setup["levels"],
     )
 
@@ -601,18 +623,15 @@ def _add_paper_parser(subparsers: Any) -> None:
         ),
     )
     p.add_argument("--seed", type=int, default=0, help="RMD seed (default 0)")
-    _solver_arg(
-        p,
-        "contact solver: auto (default; the fast exact active-set solver, the same unique "
-        "minimiser) or lawson-hanson (the paper's algorithm itself, slow), active-set, "
-        "polonsky-keer",
-    )
-    p.add_argument(
-        "--warm-start",
+    _solver_arg(p, _SOLVER_HELP)
+    warm = p.add_mutually_exclusive_group()
+    warm.add_argument(
+        "--cold",
         action="store_true",
-        help="start each level from the previous level's contact set (default: every level "
-        "from p = 0, as in the paper)",
+        help="solve every level from p = 0, as in the paper (\"without warm starting\"); "
+        "default: start each level from the previous one (the same minimiser, faster)",
     )
+    warm.add_argument("--warm-start", action="store_true", help="the default; kept for scripts")
     _add_sweep_output_arguments(p, "paper-results")
     p.set_defaults(func=_cmd_paper)
 
@@ -625,7 +644,13 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
     ny, nx = surface.shape
     description = (
         f"leakpath sweep: {args.surface} ({ny} x {nx}, dx = {surface.dx:.6g}, lengths in "
-        f"{unit}); {args.levels} levels, boundary {args.boundary}, flow axis {args.axis}, "
+        f"{unit}); "
+        + (
+            f"{len(args.mean_pressures)} imposed mean pressures"
+            if args.mean_pressures
+            else f"{args.levels} levels"
+        )
+        + f", boundary {args.boundary}, flow axis {args.axis}, "
         f"solver {args.solver}, {'cold' if args.no_warm_start else 'warm start'}"
     )
     return _run_sweep(
@@ -641,6 +666,7 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
         nu=args.nu,
         connectivity=args.connectivity,
         keep_fields=args.keep_fields,
+        mean_pressures=args.mean_pressures,
     )
 
 
@@ -668,11 +694,21 @@ def _add_sweep_parser(subparsers: Any) -> None:
     )
     p.add_argument("--unit", help="name of the length unit, for labels and metadata")
     p.add_argument("--levels", type=_positive_int, default=20, help="number of steps (default 20)")
-    _solver_arg(p, "contact solver (default auto: the fast exact active-set solver)")
+    _solver_arg(p, _SOLVER_HELP)
     p.add_argument(
         "--no-warm-start",
+        "--cold",
+        dest="no_warm_start",
         action="store_true",
-        help="solve every level from p = 0 (default: start from the previous contact set)",
+        help="solve every level from p = 0 (default: start from the previous level)",
+    )
+    p.add_argument(
+        "--mean-pressures",
+        type=_pressure_list,
+        default=None,
+        metavar="P1,P2,...",
+        help="load control: one row per imposed mean pressure p = F/A0 (increasing, in E's "
+        "unit) instead of --levels equal approaches; the table carries p/E*",
     )
     p.add_argument(
         "--boundary",

@@ -46,14 +46,20 @@ def percolation_threshold(
     nu: float = 0.0,
     atol: float | None = None,
     max_solves: int = 60,
+    warm_start: bool = True,
 ) -> PercolationThreshold:
     """Approach ``Δ_c`` and contact fraction at which the free region stops percolating.
 
-    Bisection on the approach between ``0`` (nothing in contact: the free region spans) and
-    the largest approach (``h_s`` free, ``max h − mean h`` periodic), to ``atol`` in approach
-    (default ``1e-4·h_s``). Each solve warm-starts from the contact set of the nearest
-    percolating level below. The result assumes the spanning property changes once along
-    the sweep, as it does when the contact set grows with the approach.
+    Bisection on the approach, to ``atol`` in approach (default ``1e-4·h_s``). The bracket
+    starts at ``[0, Δ_max]``: ``Δ = 0`` (nothing in contact: the free region spans) and
+    ``Δ_max = max h − mean h`` (periodic: full contact) or ``h_s`` (free). A free patch may
+    still percolate at ``h_s`` (about half of it is in contact there): the upper end is then
+    doubled until the free region stops spanning (at most ``2^10·h_s``).
+
+    ``warm_start`` (default): each solve starts from the nearest solved state below it (the
+    contact grows with the approach, so that state's pressure is a close, feasible start);
+    ``False`` solves each one from ``p = 0``. The result assumes the spanning property
+    changes once along the approach, as it does when the contact set grows with it.
     """
     if not isinstance(surface, Surface):
         raise InvalidArgumentError(
@@ -67,6 +73,7 @@ def percolation_threshold(
         )
     tol = 1e-4 * hs if atol is None else _validate.positive("atol", atol)
     max_solves = _validate.integer("max_solves", max_solves, low=2, high=100_000)
+    warm_start = _validate.flag("warm_start", warm_start)
     _validate.axis(axis)
     _validate.connectivity(connectivity)
     prob = ContactProblem(surface, E=E, nu=nu, boundary=boundary)
@@ -74,23 +81,34 @@ def percolation_threshold(
     def spans(state: ContactState) -> bool:
         return bool(state.percolation(axis=axis, connectivity=connectivity).percolates)
 
-    lo_state = prob.solve(0.0, solver=solver)
+    def solve(approach: float, below: ContactState | None) -> ContactState:
+        start = below if (warm_start and below is not None and below.approach > 0) else None
+        return prob.solve(approach, solver=solver, warm_start=start)
+
+    lo_state = solve(0.0, None)
     solves = 1
     if not spans(lo_state):
         # Even the undeformed free region does not span (e.g. a wall of maxima).
         frac = lo_state.contact_fraction
         return PercolationThreshold(0.0, frac, 0.0, lo_state, lo_state, 1, axis)
-    hi = prob.max_approach
-    hi_state = prob.solve(hi, solver=solver)
-    solves += 1
-    if spans(hi_state):
-        return PercolationThreshold(
-            float("nan"), float("nan"), float("nan"), hi_state, None, solves, axis
-        )
     lo = 0.0
+    hi = prob.max_approach
+    hi_state = solve(hi, lo_state)
+    solves += 1
+    doublings = 0
+    while spans(hi_state):
+        if boundary != "free" or doublings >= _MAX_DOUBLINGS or solves >= max_solves:
+            return PercolationThreshold(
+                float("nan"), float("nan"), float("nan"), hi_state, None, solves, axis
+            )
+        lo, lo_state = hi, hi_state
+        hi *= 2.0
+        hi_state = solve(hi, lo_state)
+        solves += 1
+        doublings += 1
     while hi - lo > tol and solves < max_solves:
         mid = 0.5 * (lo + hi)
-        st = prob.solve(mid, solver=solver, warm_start=lo_state if lo > 0 else None)
+        st = solve(mid, lo_state)
         solves += 1
         if spans(st):
             lo, lo_state = mid, st
@@ -99,9 +117,13 @@ def percolation_threshold(
     return PercolationThreshold(
         approach=hi,
         contact_fraction=hi_state.contact_fraction,
-        approach_dimensionless=hi / hs if hs > 0 else float("nan"),
+        approach_dimensionless=hi / hs,
         below=lo_state,
         above=hi_state,
         solves=solves,
         axis=axis,
     )
+
+
+#: Doublings of the free-boundary bracket past ``h_s`` before the search gives up.
+_MAX_DOUBLINGS = 10

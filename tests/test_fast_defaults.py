@@ -1,0 +1,228 @@
+"""The default (``solver="auto"``) paths: the same minimiser as the exact solver, warm starts,
+load control, and checkpoints that are bound to their run.
+
+Oracles: the exact block active set (Lawson–Hanson with Cholesky updates) for contact sets,
+a displacement-controlled solve at the returned approach for load control, and
+``scipy.ndimage.label`` for spanning.
+"""
+
+from __future__ import annotations
+
+import json
+import warnings
+
+import numpy as np
+import pytest
+from scipy import ndimage
+
+import leakpath
+from leakpath.contact import AUTO_ACTIVE_SET_MAX_POINTS, ContactProblem, solve
+from leakpath.sweep import sweep
+
+LEVELS = 10
+
+
+@pytest.fixture(scope="module")
+def surface():
+    # 65² > AUTO_ACTIVE_SET_MAX_POINTS, so "auto" runs Polonsky–Keer here.
+    s = leakpath.spectral(65, 0.9, seed=2, rms_height=1.0)
+    assert s.heights.size > AUTO_ACTIVE_SET_MAX_POINTS
+    return s
+
+
+@pytest.fixture(scope="module")
+def default_sweep(surface):
+    return sweep(surface, levels=LEVELS)
+
+
+def spans_axis(free: np.ndarray, axis: int) -> bool:
+    labels, _ = ndimage.label(free)
+    first = np.take(labels, 0, axis=axis)
+    last = np.take(labels, -1, axis=axis)
+    return bool(set(first[first > 0]) & set(last[last > 0]))
+
+
+def test_default_solver_is_polonsky_keer_with_a_tight_certificate(surface):
+    st = solve(surface, 0.5 * surface.height_range)
+    assert st.solver == "polonsky-keer"
+    assert st.kkt <= 1e-12
+    small = leakpath.rmd(4, 2.2, seed=0)
+    assert solve(small, 0.5 * small.height_range).solver == "active-set"
+
+
+def test_default_sweep_has_the_exact_contact_sets(surface, default_sweep):
+    """Every level of the default (warm, Polonsky–Keer) sweep has the exact solver's contact
+    set and free volume, including a level past the height range."""
+    prob = ContactProblem(surface)
+    for k, row in enumerate(default_sweep.rows):
+        exact = prob.solve(row["approach"], solver="active-set")
+        assert np.array_equal(default_sweep.contact_mask(k), exact.contact), k
+        assert row["free_volume"] == pytest.approx(exact.free_volume, rel=1e-9, abs=1e-15)
+        assert row["solver"] == "polonsky-keer"
+    deep = solve(surface, 1.3 * surface.height_range)
+    exact = prob.solve(1.3 * surface.height_range, solver="active-set")
+    assert np.array_equal(deep.contact, exact.contact)
+
+
+def test_cold_replay_gives_the_same_table_to_round_off(surface, default_sweep):
+    cold = sweep(surface, levels=LEVELS, warm_start=False)
+    assert list(cold.column("n_contact")) == list(default_sweep.column("n_contact"))
+    np.testing.assert_allclose(
+        cold.column("free_volume"), default_sweep.column("free_volume"), rtol=1e-9
+    )
+
+
+def test_warm_start_from_a_state_or_pressure_field(surface):
+    prob = ContactProblem(surface)
+    hs = surface.height_range
+    first = prob.solve(0.4 * hs)
+    cold = prob.solve(0.5 * hs)
+    from_state = prob.solve(0.5 * hs, warm_start=first)
+    from_field = prob.solve(0.5 * hs, warm_start=first.pressure)
+    assert np.array_equal(from_state.pressure, from_field.pressure)
+    assert np.array_equal(from_state.contact, cold.contact)
+    assert from_state.iterations < cold.iterations
+    with pytest.raises(ValueError, match="^warm_start"):
+        prob.solve(0.5 * hs, warm_start=np.ones((3, 3), dtype=bool))
+    with pytest.raises(ValueError, match="^warm_start"):
+        prob.solve(0.5 * hs, warm_start=np.full(surface.shape, np.nan))
+
+
+@pytest.mark.parametrize("boundary", ["free", "periodic"])
+def test_load_control_reaches_the_displacement_solution(surface, boundary):
+    prob = ContactProblem(surface, E=2.0, nu=0.3, boundary=boundary)
+    pbar = 0.02 * prob.e_star * surface.height_range / surface.length[0]
+    st = prob.solve(mean_pressure=pbar)
+    assert st.mean_pressure == pytest.approx(pbar, rel=1e-12)
+    # The exact solver at the approach the load-controlled solve found.
+    exact = prob.solve(st.approach, solver="active-set")
+    assert np.array_equal(st.contact, exact.contact)
+    assert exact.mean_pressure == pytest.approx(pbar, rel=1e-8)
+
+
+def test_load_control_arguments(surface):
+    prob = ContactProblem(surface)
+    with pytest.raises(ValueError, match="^approach"):
+        prob.solve(0.1, mean_pressure=0.1)
+    with pytest.raises(ValueError, match="^approach"):
+        prob.solve()
+    with pytest.raises(ValueError, match="^mean_pressure"):
+        prob.solve(mean_pressure=-1.0)
+    with pytest.raises(ValueError, match="^solver"):
+        prob.solve(mean_pressure=0.1, solver="active-set")
+
+
+def test_sweep_over_mean_pressures(surface):
+    e_star = 1.0 / (1 - 0.25**2)
+    pressures = np.array([0.005, 0.01, 0.02, 0.04]) * e_star
+    res = sweep(surface, mean_pressures=pressures, nu=0.25)
+    np.testing.assert_allclose(res.column("mean_pressure"), pressures, rtol=1e-12)
+    np.testing.assert_allclose(res.column("mean_pressure_star"), pressures / e_star, rtol=1e-12)
+    assert np.all(np.diff(res.column("approach")) > 0)
+    assert np.all(np.diff(res.column("contact_fraction")) > 0)
+    with pytest.raises(ValueError, match="^mean_pressures"):
+        sweep(surface, mean_pressures=[0.1, 0.05])
+    with pytest.raises(ValueError, match="^mean_pressures"):
+        sweep(surface, approaches=[0.0, 0.1], mean_pressures=[0.1])
+
+
+def test_warm_sweep_resumes_byte_identically(tmp_path, surface, default_sweep):
+    ck = tmp_path / "ck"
+    full = sweep(surface, levels=LEVELS, checkpoint_dir=ck)
+    assert full.csv_text() == default_sweep.csv_text()
+    for k in range(4, LEVELS + 1):
+        (ck / f"level_{k:04d}.json").unlink()
+    again = sweep(surface, levels=LEVELS, checkpoint_dir=ck)
+    assert again.resumed == [0, 1, 2, 3]
+    assert again.csv_text() == full.csv_text()
+
+
+def _tamper(path, edit):
+    data = json.loads(path.read_text())
+    edit(data)
+    path.write_text(json.dumps(data))
+
+
+@pytest.mark.parametrize(
+    "edit",
+    [
+        lambda d: d["row"].__setitem__("load", d["row"]["load"] * 1.0000001),
+        lambda d: d["row"].__setitem__("load", None),
+        lambda d: d["row"].__setitem__("n_contact", -5),
+        lambda d: d.__setitem__("mask", "garbage"),
+        lambda d: d.pop("row"),
+    ],
+)
+def test_corrupt_checkpoints_are_recomputed_not_used(tmp_path, surface, default_sweep, edit):
+    ck = tmp_path / "ck"
+    sweep(surface, levels=LEVELS, checkpoint_dir=ck)
+    _tamper(ck / "level_0005.json", edit)
+    with pytest.warns(UserWarning, match="level 5"):
+        again = sweep(surface, levels=LEVELS, checkpoint_dir=ck)
+    assert 5 in again.recomputed and 5 not in again.resumed
+    assert again.csv_text() == default_sweep.csv_text()
+
+
+def test_truncated_checkpoint_is_recomputed(tmp_path, surface, default_sweep):
+    ck = tmp_path / "ck"
+    sweep(surface, levels=LEVELS, checkpoint_dir=ck)
+    path = ck / "level_0003.json"
+    path.write_bytes(path.read_bytes()[:100])
+    with pytest.warns(UserWarning, match="level 3"):
+        again = sweep(surface, levels=LEVELS, checkpoint_dir=ck)
+    assert again.csv_text() == default_sweep.csv_text()
+
+
+def test_foreign_checkpoints_are_recomputed(tmp_path, surface, default_sweep):
+    other = leakpath.spectral(65, 0.9, seed=5, rms_height=1.0)
+    a, b = tmp_path / "a", tmp_path / "b"
+    sweep(surface, levels=LEVELS, checkpoint_dir=a)
+    sweep(other, levels=LEVELS, checkpoint_dir=b)
+    for k in range(6, LEVELS + 1):
+        name = f"level_{k:04d}.json"
+        (a / name).write_bytes((b / name).read_bytes())
+    with pytest.warns(UserWarning, match="another run"):
+        again = sweep(surface, levels=LEVELS, checkpoint_dir=a)
+    assert again.recomputed == list(range(6, LEVELS + 1))
+    assert again.csv_text() == default_sweep.csv_text()
+
+
+def test_intact_checkpoints_resume_without_warnings(tmp_path, surface):
+    ck = tmp_path / "ck"
+    sweep(surface, levels=LEVELS, checkpoint_dir=ck)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        again = sweep(surface, levels=LEVELS, checkpoint_dir=ck)
+    assert again.resumed == list(range(LEVELS + 1)) and again.recomputed == []
+
+
+def test_threshold_warm_and_cold_agree_and_bracket(surface):
+    warm = leakpath.percolation_threshold(surface, axis=1, boundary="periodic")
+    cold = leakpath.percolation_threshold(
+        surface, axis=1, boundary="periodic", warm_start=False
+    )
+    assert warm.found and cold.found
+    assert abs(warm.approach - cold.approach) <= 1e-4 * surface.height_range
+    # Periodic: clusters wrap across axis 0; three copies stacked along it show that.
+    periodic_spans = lambda m: spans_axis(np.tile(m, (3, 1)), 1)  # noqa: E731
+    assert periodic_spans(~warm.below.contact)
+    assert not periodic_spans(~warm.above.contact)
+
+
+def test_free_threshold_past_the_height_range_is_found():
+    """A free patch that still percolates at Δ = h_s: the bracket is doubled until the free
+    region stops spanning (checked with scipy labels on the bracketing states)."""
+    found = None
+    for seed in range(8):
+        s = leakpath.rmd(6, 2.1, seed=seed)
+        st = solve(s, s.height_range)
+        if spans_axis(~st.contact, 0):
+            found = s
+            break
+    assert found is not None, "no surface in the scan percolates at h_s"
+    res = leakpath.percolation_threshold(found, axis=0, atol=1e-3 * found.height_range)
+    assert res.found
+    assert res.approach > found.height_range
+    assert spans_axis(~res.below.contact, 0)
+    assert not spans_axis(~res.above.contact, 0)
+    assert res.above.approach - res.below.approach <= 1e-3 * found.height_range
