@@ -288,20 +288,29 @@ import leakpath
 from leakpath import _core
 from leakpath.contact import ContactProblem
 n, frac, pre = int(sys.argv[1]), float(sys.argv[2]), sys.argv[3] == "1"
-s = leakpath.rmd(12, 2.1, seed=0) if n == 4097 else leakpath.spectral(n, 0.9, seed=0, rms_height=1.0)
+if n == 4097:
+    s = leakpath.rmd(12, 2.1, seed=0)
+else:
+    s = leakpath.spectral(n, 0.9, seed=0, rms_height=1.0)
 h = np.ascontiguousarray(s.heights)
 prob = ContactProblem(h, dx=1.0)
 p = np.zeros_like(h)
-t0 = time.perf_counter(); prob._core.apply(p); prob._core.apply(p); t_apply = (time.perf_counter() - t0) / 2
+prob._core.apply(p)
+t0 = time.perf_counter()
+for _ in range(3):
+    prob._core.apply(p)
+t_apply = (time.perf_counter() - t0) / 3
 hs = h.max() - h.min()
 t0 = time.perf_counter()
 out = _core.solve_polonsky_keer(h, 1.0, 1.0, "free", approach=frac * hs, tol=1e-8,
                                 precondition=pre, operator_of=prob._core)
 dt = time.perf_counter() - t0
-print(json.dumps({"seconds": dt, "iterations": out["iterations"], "applies": out["applies"],
-                  "pre": out["preconditioner_applies"], "contact_fraction": out["contact_points"] / h.size,
-                  "free_volume": float(out["gap"].sum()), "apply_ms": t_apply * 1e3,
-                  "peak_MiB": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}))
+print(json.dumps({
+    "seconds": dt, "iterations": out["iterations"], "applies": out["applies"],
+    "pre": out["preconditioner_applies"], "contact_fraction": out["contact_points"] / h.size,
+    "free_volume": float(out["gap"].sum()), "apply_ms": t_apply * 1e3,
+    "peak_MiB": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+}))
 """
 
 
