@@ -41,11 +41,13 @@ SOLVERS = ("lawson-hanson", "active-set", "polonsky-keer", "auto")
 DEFAULT_TOL = 1e-12
 
 #: ``solver="auto"`` uses the exact block active set on grids of at most this many points
-#: and Polonsky–Keer above. Measured (``benchmarks/auto_policy_bench.py``): on 33² the
-#: active set is faster than Polonsky–Keer at every approach, on 65² it is slower from
-#: moderate contact on, and on 129² it is 10–100× slower at half contact (its factor work
-#: grows like k³ in the contact points k, Polonsky–Keer like N log N per iteration).
-AUTO_ACTIVE_SET_MAX_POINTS = 48 * 48
+#: and Polonsky–Keer above. Measured from p = 0 at Δ = 0.3/0.6/1.0 h_s
+#: (``benchmarks/auto_policy_bench.py``, ``benchmarks/results/auto_policy.md``): on 17² the
+#: active set is faster at low contact and the two are within a few milliseconds; from 33²
+#: on Polonsky–Keer is as fast or faster at every approach, 20× at 129² and Δ = 0.6 h_s and
+#: 400× at Δ = h_s (the factor work grows like k³ in the contact points k, Polonsky–Keer
+#: like N log N per iteration).
+AUTO_ACTIVE_SET_MAX_POINTS = 32 * 32
 
 
 def default_memory_limit() -> int:
