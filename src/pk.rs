@@ -1650,6 +1650,41 @@ mod tests {
     }
 
     #[test]
+    fn preconditioned_and_plain_reach_the_same_minimiser() {
+        // Larger than the dense tests, so the preconditioned conjugate steps run for many
+        // iterations; both iterations must land on the same contact set and pressures.
+        let (ny, nx) = (48usize, 40usize);
+        let h = rough(ny, nx, 7);
+        let (hmax, hmin, hsum) = height_stats(&h);
+        let mut used = 0;
+        for boundary in [Boundary::Free, Boundary::Periodic] {
+            let pr = problem(&h, ny, nx, boundary);
+            let top = match boundary {
+                Boundary::Free => hmax - hmin,
+                Boundary::Periodic => hmax - hsum / (ny * nx) as f64,
+            };
+            for frac in [0.2, 0.5, 0.9] {
+                let delta = frac * top;
+                let plain = Options {
+                    precondition: false,
+                    ..opts(1e-12)
+                };
+                let a = solve(&pr, Control::Approach(delta), &opts(1e-12)).unwrap();
+                let b = solve(&pr, Control::Approach(delta), &plain).unwrap();
+                used += a.preconditioner_applies;
+                assert_eq!(b.preconditioner_applies, 0);
+                let ca: Vec<bool> = a.pressure.iter().map(|&p| p > 0.0).collect();
+                let cb: Vec<bool> = b.pressure.iter().map(|&p| p > 0.0).collect();
+                assert_eq!(ca, cb, "{boundary:?} Δ*={frac}");
+                let e = max_rel(&a.pressure, &b.pressure);
+                assert!(e < 1e-8, "{boundary:?} Δ*={frac}: rel diff {e}");
+                assert!(a.kkt <= 1e-12 && b.kkt <= 1e-12);
+            }
+        }
+        assert!(used > 0, "no preconditioned step was taken");
+    }
+
+    #[test]
     fn matches_dense_exact_solution_periodic() {
         let (ny, nx) = (8usize, 10usize);
         let h = rough(ny, nx, 11);

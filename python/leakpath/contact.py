@@ -101,6 +101,11 @@ class ContactState:
     iterations: int
     kkt: float
     seconds: float
+    #: Polonsky–Keer: operator applications ``C x`` (forward + inverse real FFT of the padded
+    #: grid) and preconditioner applications (FFT pairs on the unpadded grid); 0 for the
+    #: exact solvers, which work on dense blocks.
+    fft_products: int = 0
+    preconditioner_products: int = 0
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -417,6 +422,8 @@ class ContactProblem:
             iterations=int(out["iterations"]),
             kkt=float(out["kkt"]),
             seconds=float(out["seconds"]),
+            fft_products=int(out.get("applies", 0)),
+            preconditioner_products=int(out.get("preconditioner_applies", 0)),
         )
 
 
