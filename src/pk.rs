@@ -158,7 +158,7 @@ pub fn sparse_limit(boundary: Boundary) -> usize {
 /// 573 → 333, 884 → 478, 1090 → 670, 1268 → 797, 1382 → 1131; periodic at 0.5/0.8/0.9/0.95
 /// of full contact 611 → 306, 1470 → 525, 1999 → 952, 2213 → 1250, and unchanged near full
 /// contact (0.999), where more than half of the points are in contact for most of the solve.
-const PRECONDITION_MAX_FRACTION: f64 = 0.5;
+pub const PRECONDITION_MAX_FRACTION: f64 = 0.5;
 
 /// A preconditioned solve whose certificate grows past this multiple of its best value so
 /// far continues with plain Polonsky–Keer steps.
