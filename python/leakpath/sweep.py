@@ -96,7 +96,7 @@ import numpy.typing as npt
 
 from . import __version__, _validate
 from .contact import AUTO_ACTIVE_SET_MAX_POINTS, SOLVERS, ContactProblem, ContactState
-from .errors import InvalidArgumentError
+from .errors import InvalidArgumentError, NotConvergedError
 from .moments import nayak_moments
 from .surfaces import Surface
 
@@ -617,10 +617,13 @@ def _solve_accepted(
     restarts = 0
     while not (state.kkt <= KKT_ACCEPT):
         if restarts >= 2:
-            raise RuntimeError(
-                f"solver {solver!r} did not reach the KKT threshold {KKT_ACCEPT:g} at "
+            raise NotConvergedError(
+                f"solver: {solver!r} did not reach the KKT threshold {KKT_ACCEPT:g} at "
                 f"approach {approach!r} (certificate {state.kkt:.3g} after {restarts} "
-                "exact restarts)"
+                "exact restarts); check the surface's units, or try solver='active-set'",
+                solver=solver,
+                iterations=iterations,
+                residual=state.kkt,
             )
         restart_solver = "active-set" if solver in ("polonsky-keer", "auto") else solver
         state = problem.solve(approach, solver=restart_solver, warm_start=state.contact)  # type: ignore[arg-type]
