@@ -46,13 +46,19 @@ const NOT_IN_P: usize = usize::MAX;
 
 /// Threads for a dense kernel of about `work` multiply-adds: below ~1/4 M the cost of waking
 /// a second thread exceeds the gain (small grids do hundreds of such calls per solve).
+/// Above, a fixed split into [`DENSE_TASKS`] tasks, not one per available thread: faer
+/// partitions (and so sums) by the task count, and a count that followed the machine would
+/// make the last bits of the pressures depend on it.
 fn par_for(work: usize) -> Par {
     if work < (1 << 18) {
         Par::Seq
     } else {
-        Par::rayon(0)
+        Par::rayon(DENSE_TASKS)
     }
 }
+
+/// Tasks of a large dense kernel (see [`par_for`]).
+const DENSE_TASKS: usize = 4;
 
 /// How many free points enter the passive set per outer iteration.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -19,6 +19,10 @@ r = leakpath.sweep(s, levels=6)
 sys.stdout.write(r.csv_text())
 t = leakpath.percolation_threshold(s, axis=1, boundary="periodic", atol=1e-3 * s.height_range)
 print(repr(t.approach), repr(t.contact_fraction))
+# The exact solver's dense kernels (Cholesky updates large enough to run in parallel).
+e = leakpath.rmd(6, 2.1, seed=3)
+st = leakpath.solve(e, 0.8 * e.height_range, solver="active-set")
+print(st.pressure.tobytes().hex()[:4000], st.pressure.sum().hex(), st.gap.sum().hex())
 """
 
 
@@ -31,7 +35,7 @@ def run(threads: int) -> str:
     return proc.stdout
 
 
-def test_default_sweep_and_threshold_are_identical_for_1_2_4_threads():
+def test_default_paths_and_the_exact_solver_are_identical_for_1_2_4_threads():
     one = run(1)
     assert one.count("\n") >= 8
     assert run(2) == one
