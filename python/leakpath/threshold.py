@@ -93,10 +93,16 @@ def percolation_threshold(
         return PercolationThreshold(0.0, frac, 0.0, lo_state, lo_state, 1, axis)
     lo = 0.0
     hi = prob.max_approach
-    hi_state = solve(hi, lo_state)
-    solves += 1
+    hi_state: ContactState | None = None
+    if boundary == "periodic":
+        # Full contact: no free cell, so nothing spans; no need to solve there (near full
+        # contact is the slowest state to solve). Solved at the end only if still needed.
+        pass
+    else:
+        hi_state = solve(hi, lo_state)
+        solves += 1
     doublings = 0
-    while spans(hi_state):
+    while hi_state is not None and spans(hi_state):
         if boundary != "free" or doublings >= _MAX_DOUBLINGS or solves >= max_solves:
             return PercolationThreshold(
                 float("nan"), float("nan"), float("nan"), hi_state, None, solves, axis
@@ -114,6 +120,9 @@ def percolation_threshold(
             lo, lo_state = mid, st
         else:
             hi, hi_state = mid, st
+    if hi_state is None:
+        hi_state = solve(hi, lo_state)
+        solves += 1
     return PercolationThreshold(
         approach=hi,
         contact_fraction=hi_state.contact_fraction,
