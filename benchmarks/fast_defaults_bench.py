@@ -39,7 +39,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import statistics
 import subprocess
 import sys
@@ -48,6 +47,9 @@ import time
 from pathlib import Path
 
 import numpy as np
+
+# Run as a script: the benchmarks folder is on sys.path.
+from large_grid_bench import available, machine  # noqa: E402
 
 import leakpath
 from leakpath import _core
@@ -58,31 +60,7 @@ OUT = RESULTS / "fast_defaults.md"
 
 
 def have(mod: str) -> bool:
-    try:
-        __import__(mod)
-        return True
-    except Exception:
-        return False
-
-
-def machine() -> str:
-    cpu = "unknown"
-    try:
-        for line in open("/proc/cpuinfo"):
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    vers = [f"leakpath {leakpath.__version__}", f"numpy {np.__version__}"]
-    if have("ContactMechanics"):
-        import ContactMechanics
-
-        vers.append(f"ContactMechanics {ContactMechanics.__version__}")
-    return (
-        f"{platform.platform()}; {cpu}; {os.cpu_count()} cores; Python "
-        f"{platform.python_version()}; " + ", ".join(vers)
-    )
+    return available(mod)
 
 
 def load() -> str:

@@ -144,29 +144,13 @@ impl Operator {
     /// its buffers cannot be allocated.
     pub fn try_periodic(ny: usize, nx: usize, dx: f64, e_star: f64) -> Result<Self> {
         let mut op = Self::plan(ny, nx, ny, nx, Boundary::Periodic)?;
-        let norm = 1.0 / (ny * nx) as f64;
-        let two_pi = 2.0 * std::f64::consts::PI;
-        let (ly, lx) = (ny as f64 * dx, nx as f64 * dx);
-        let pxh = op.pxh;
-        let mut spec: Vec<f64> = alloc::try_zeroed(pxh * ny, "the stiffness spectrum")?;
-        spec.par_chunks_mut(ny).enumerate().for_each(|(c, col)| {
-            let qx = two_pi * c as f64 / lx;
-            for (r, v) in col.iter_mut().enumerate() {
-                let kr = if r <= ny / 2 {
-                    r as f64
-                } else {
-                    r as f64 - ny as f64
-                };
-                let qy = two_pi * kr / ly;
-                let q = (qx * qx + qy * qy).sqrt();
-                *v = if q > 0.0 {
-                    2.0 / (e_star * q) * norm
-                } else {
-                    0.0
-                };
+        op.spec = op.radial_spectrum(dx, "the stiffness spectrum", |q| {
+            if q > 0.0 {
+                2.0 / (e_star * q)
+            } else {
+                0.0
             }
-        });
-        op.spec = spec;
+        })?;
         Ok(op)
     }
 
@@ -180,12 +164,26 @@ impl Operator {
     pub fn inverse_compliance(ny: usize, nx: usize, dx: f64, e_star: f64) -> Result<Self> {
         let (py, px) = (smooth_size(ny), smooth_size(nx));
         let mut op = Self::plan(ny, nx, py, px, Boundary::Periodic)?;
+        let q_min = 2.0 * std::f64::consts::PI / (py.max(px) as f64 * dx);
+        op.spec = op.radial_spectrum(dx, "the preconditioner spectrum", |q| {
+            0.5 * e_star * q.max(q_min)
+        })?;
+        Ok(op)
+    }
+
+    /// `f(|q|)` on the half spectrum of the transform grid, `q = 2π·(k/L)` rad/length with
+    /// `L = P·dx`, column-major and divided by `Py·Px` (the inverse FFT is unnormalised).
+    fn radial_spectrum(
+        &self,
+        dx: f64,
+        what: &str,
+        f: impl Fn(f64) -> f64 + Sync,
+    ) -> Result<Vec<f64>> {
+        let (py, px, pxh) = (self.py, self.px, self.pxh);
         let norm = 1.0 / (py * px) as f64;
         let two_pi = 2.0 * std::f64::consts::PI;
         let (ly, lx) = (py as f64 * dx, px as f64 * dx);
-        let q_min = two_pi / ly.max(lx);
-        let pxh = op.pxh;
-        let mut spec = alloc::try_zeroed(pxh * py, "the preconditioner spectrum")?;
+        let mut spec: Vec<f64> = alloc::try_zeroed(pxh * py, what)?;
         spec.par_chunks_mut(py).enumerate().for_each(|(c, col)| {
             let qx = two_pi * c as f64 / lx;
             for (r, v) in col.iter_mut().enumerate() {
@@ -195,12 +193,10 @@ impl Operator {
                     r as f64 - py as f64
                 };
                 let qy = two_pi * kr / ly;
-                let q = (qx * qx + qy * qy).sqrt().max(q_min);
-                *v = 0.5 * e_star * q * norm;
+                *v = f((qx * qx + qy * qy).sqrt()) * norm;
             }
         });
-        op.spec = spec;
-        Ok(op)
+        Ok(spec)
     }
 
     /// FFT plans and the apply buffer (allocated here, so that `apply` never has to).

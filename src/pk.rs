@@ -1328,9 +1328,7 @@ fn run(op: &Operator, problem: &Problem, control: Control, opts: &Options) -> Re
         let mut dir = Acc::ZERO;
         // Past half contact the preconditioned steps stop paying (measured: the same or more
         // iterations); the first steepest step from p = 0 can pass it briefly.
-        if w.pre.is_some()
-            && !steepest
-            && state.n_c as f64 <= PRECONDITION_MAX_FRACTION * n as f64
+        if w.pre.is_some() && !steepest && state.n_c as f64 <= PRECONDITION_MAX_FRACTION * n as f64
         {
             // G = Σ_{I_c} g z; β continues only a preconditioned sequence.
             let gz = w.precondition().gt;
