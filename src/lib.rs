@@ -1,7 +1,8 @@
 //! Rust core of leakpath: boundary-element contact of an elastic rough surface against a rigid
 //! flat, and the connectivity of the free region between them.
 //!
-//! Pure Rust; the PyO3 bindings live in `python.rs` only.
+//! Pure Rust; the PyO3 bindings live in `python.rs` only, behind the `python` feature
+//! (default), so `cargo build --no-default-features` has no pyo3 or numpy.
 
 pub mod alloc;
 pub mod clusters;
@@ -11,6 +12,7 @@ pub mod nnls;
 pub mod operator;
 pub mod pk;
 
+#[cfg(feature = "python")]
 mod python;
 
 pub use error::{Error, Result};
