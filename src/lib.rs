@@ -5,6 +5,7 @@
 
 pub mod clusters;
 pub mod error;
+pub mod flow;
 pub mod influence;
 pub mod nnls;
 pub mod operator;
