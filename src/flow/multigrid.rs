@@ -86,7 +86,7 @@ impl Multigrid {
             ops,
             bufs: Mutex::new(bufs),
             coarse,
-            sweeps: 2,
+            sweeps: 1,
         }
     }
 
