@@ -48,9 +48,6 @@ use multigrid::Multigrid;
 /// Default relative residual `‖b − A x‖₂ / ‖b‖₂`.
 pub const DEFAULT_TOL: f64 = 1e-12;
 
-/// Relative difference of the inlet and outlet flow rates the solver aims for.
-pub const BALANCE_TOL: f64 = 1e-10;
-
 /// A Reynolds-flow problem on a row-major `ny × nx` gap field.
 pub struct Problem<'a> {
     /// Gap `g ≥ 0` (length).
@@ -361,14 +358,14 @@ fn solve_axis0(
         let apply = |v: &[f64], out: &mut [f64]| mg.fine().apply(v, out);
         let mut pre = |r: &[f64], z: &mut [f64]| mg.apply(r, z, &mut work);
         // Σ r = Q_in − Q_out: go on until the inlet and outlet flow rates agree to
-        // BALANCE_TOL, or round-off stops the progress.
+        // `tol` too, or round-off stops the progress.
         let st = mg.fine();
         let balanced = |x: &[f64], r: &[f64]| {
             let q_out: f64 = (0..nx)
                 .map(|j| st.dir[(ny - 1) * nx + j] * x[(ny - 1) * nx + j])
                 .sum();
             let imbalance = cg::sum(r);
-            imbalance.abs() / (BALANCE_TOL * q_out.abs())
+            imbalance.abs() / (opts.tol * q_out.abs())
         };
         cg::pcg(
             &apply,
