@@ -270,3 +270,22 @@ def test_repr_is_short():
     f = leakpath.flow(np.ones((4, 6)), dx=1.0)
     r = repr(f)
     assert r.startswith("Flow(Q=") and len(r) < 250
+
+
+def test_cli_flow_json(capsys):
+    import json
+
+    from leakpath.cli import main
+
+    rc = main(["flow", "spectral:n=64,hurst=0.8,seed=2,rms_height=1", "--approach", "1.0",
+               "--boundary", "periodic", "--viscosity", "2", "--pressure-drop", "3", "--json"])
+    assert rc == 0
+    out = json.loads(capsys.readouterr().out)
+    s = leakpath.spectral(64, 0.8, seed=2, rms_height=1.0)
+    st = leakpath.solve(s, 1.0, boundary="periodic", solver="polonsky-keer")
+    f = st.flow(viscosity=2.0, pressure_drop=3.0)
+    assert out["flow_rate"] == pytest.approx(f.flow_rate, rel=1e-9)
+    assert out["contact_fraction"] == pytest.approx(st.contact_fraction)
+    rc = main(["flow", "spectral:n=64,hurst=0.8,seed=2", "--approach", "1", "--viscosity", "0"])
+    assert rc == 2
+    assert "viscosity" in capsys.readouterr().err
