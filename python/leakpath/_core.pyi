@@ -158,6 +158,6 @@ def solve_reynolds_flow(
     increasing index), ``flow_rate`` (outlet), ``inlet_flow_rate``, ``conductance``
     (``Q/Δp``), ``residual``, ``conservation`` (largest net cell flux / Q), ``iterations``,
     ``n_unknowns``, ``levels``, ``seconds``. ``InvalidArgumentError`` for bad input,
-    ``NotConvergedError`` past ``max_iter`` (default 1000), ``ProblemTooLargeError`` above
+    ``NotConvergedError`` past ``max_iter`` (default 20000), ``ProblemTooLargeError`` above
     ``memory_limit`` bytes. The GIL is released; Ctrl-C raises ``KeyboardInterrupt``.
     """

@@ -141,7 +141,7 @@ def flow(
             (no wrap for a gap array).
         contact: contact mask for a gap array (bool, the gap's shape); default ``gap ≤ 0``.
         tol: relative residual ``‖b − Ax‖₂/‖b‖₂`` (default 1e-12).
-        max_iter: conjugate-gradient iterations allowed (default 1000).
+        max_iter: conjugate-gradient iterations allowed (default 20000).
         memory_limit: bytes allowed (default 70 % of physical memory).
 
     Raises:

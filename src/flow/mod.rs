@@ -48,6 +48,10 @@ use multigrid::Multigrid;
 /// Default relative residual `‖b − A x‖₂ / ‖b‖₂`.
 pub const DEFAULT_TOL: f64 = 1e-12;
 
+/// Default iteration cap. Gaps of contacts near the percolation threshold, whose
+/// conductances `g³` span 15 orders of magnitude at the contact edges, take thousands.
+pub const DEFAULT_MAX_ITER: usize = 20_000;
+
 /// A Reynolds-flow problem on a row-major `ny × nx` gap field.
 pub struct Problem<'a> {
     /// Gap `g ≥ 0` (length).
@@ -72,7 +76,7 @@ pub struct Problem<'a> {
 pub struct Options<'a> {
     /// Relative residual to reach.
     pub tol: f64,
-    /// Conjugate-gradient iterations allowed (default 1000).
+    /// Conjugate-gradient iterations allowed (default [`DEFAULT_MAX_ITER`]).
     pub max_iter: Option<usize>,
     /// Refuse up front with [`Error::TooLarge`] above this many bytes.
     pub memory_limit: Option<u64>,
@@ -350,7 +354,7 @@ fn solve_axis0(
 
     let (fine, rhs) = fine_stencil(&c, ny, nx, periodic);
     let mut x = vec![0.0; n];
-    let max_iter = opts.max_iter.unwrap_or(1000);
+    let max_iter = opts.max_iter.unwrap_or(DEFAULT_MAX_ITER);
     let mg = Multigrid::new(fine);
     let levels = mg.n_levels();
     let outcome = {
