@@ -764,7 +764,7 @@ mod flow_py {
     #[pyfunction]
     #[pyo3(signature = (
         gap, dx, contact=None, axis=0, viscosity=1.0, pressure_drop=1.0, periodic=false,
-        tol=flow::DEFAULT_TOL, max_iter=None, memory_limit=None
+        tol=flow::DEFAULT_TOL, max_iter=None, memory_limit=None, solver="auto"
     ))]
     #[allow(clippy::too_many_arguments)]
     pub(super) fn solve_reynolds_flow<'py>(
@@ -779,7 +779,9 @@ mod flow_py {
         tol: f64,
         max_iter: Option<usize>,
         memory_limit: Option<u64>,
+        solver: &str,
     ) -> PyResult<Bound<'py, PyDict>> {
+        let solver = flow::Solver::parse(solver).map_err(to_py)?;
         let [ny, nx] = [gap.shape()[0], gap.shape()[1]];
         if let Some(c) = &contact {
             if c.shape() != gap.shape() {
@@ -814,6 +816,7 @@ mod flow_py {
             .detach(|| {
                 let stop = || Python::attach(|py| py.check_signals().is_err());
                 let opts = Options {
+                    solver,
                     tol,
                     max_iter,
                     memory_limit,

@@ -35,6 +35,7 @@
 
 pub mod assemble;
 pub mod cg;
+pub mod direct;
 pub mod multigrid;
 
 use rayon::prelude::*;
@@ -72,8 +73,40 @@ pub struct Problem<'a> {
     pub periodic: bool,
 }
 
+/// Which linear solver.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Solver {
+    /// Cholesky up to [`DIRECT_MAX_UNKNOWNS`] unknowns, multigrid above.
+    Auto,
+    /// Sparse Cholesky ([`direct`]), with two steps of iterative refinement.
+    Cholesky,
+    /// Conjugate gradients with the multigrid preconditioner ([`multigrid`]).
+    Multigrid,
+}
+
+impl Solver {
+    /// `"auto"`, `"cholesky"` or `"multigrid"`.
+    pub fn parse(s: &str) -> Result<Self> {
+        match s {
+            "auto" => Ok(Solver::Auto),
+            "cholesky" => Ok(Solver::Cholesky),
+            "multigrid" => Ok(Solver::Multigrid),
+            _ => Err(Error::invalid(
+                "solver",
+                format!("must be 'auto', 'cholesky' or 'multigrid', got {s:?}"),
+            )),
+        }
+    }
+}
+
+/// `Solver::Auto` factors systems up to this many unknowns (the factor of a 2-D grid with
+/// AMD ordering holds some tens of entries per unknown).
+pub const DIRECT_MAX_UNKNOWNS: usize = 4_000_000;
+
 /// Solver settings.
 pub struct Options<'a> {
+    /// Linear solver.
+    pub solver: Solver,
     /// Relative residual to reach.
     pub tol: f64,
     /// Conjugate-gradient iterations allowed (default [`DEFAULT_MAX_ITER`]).
@@ -87,6 +120,7 @@ pub struct Options<'a> {
 impl Default for Options<'_> {
     fn default() -> Self {
         Options {
+            solver: Solver::Auto,
             tol: DEFAULT_TOL,
             max_iter: None,
             memory_limit: None,
@@ -228,7 +262,13 @@ pub fn solve(pr: &Problem<'_>, opts: &Options<'_>) -> Result<Solution> {
     validate(pr, opts)?;
     let cells = pr.ny * pr.nx;
     if let Some(limit) = opts.memory_limit {
-        let need = memory_estimate(cells);
+        let factor = match opts.solver {
+            Solver::Multigrid => 0,
+            Solver::Auto if cells > DIRECT_MAX_UNKNOWNS => 0,
+            // AMD on a 2-D grid: a few tens of factor entries (value + row index) per cell.
+            _ => 40 * 16 * cells as u64,
+        };
+        let need = memory_estimate(cells) + factor;
         if need > limit {
             return Err(Error::TooLarge {
                 bytes: need,
@@ -288,6 +328,12 @@ pub fn solve(pr: &Problem<'_>, opts: &Options<'_>) -> Result<Solution> {
         n_unknowns: unit.n_unknowns,
         levels: unit.levels,
     })
+}
+
+/// The fine operator, alone or inside the multigrid hierarchy built on it.
+enum System {
+    Plain(assemble::Stencil),
+    Multigrid(Multigrid),
 }
 
 /// The dimensionless solution for flow along axis 0 with `φ = 1` at the inlet, 0 at the outlet,
@@ -355,32 +401,55 @@ fn solve_axis0(
     let (fine, rhs) = fine_stencil(&c, ny, nx, periodic);
     let mut x = vec![0.0; n];
     let max_iter = opts.max_iter.unwrap_or(DEFAULT_MAX_ITER);
-    let mg = Multigrid::new(fine);
-    let levels = mg.n_levels();
-    let outcome = {
-        let mut work = vec![0.0; n];
-        let apply = |v: &[f64], out: &mut [f64]| mg.fine().apply(v, out);
-        let mut pre = |r: &[f64], z: &mut [f64]| mg.apply(r, z, &mut work);
-        // Σ r = Q_in − Q_out: go on until the inlet and outlet flow rates agree to
-        // `tol` too, or round-off stops the progress.
-        let st = mg.fine();
-        let balanced = |x: &[f64], r: &[f64]| {
-            let q_out: f64 = (0..nx)
-                .map(|j| st.dir[(ny - 1) * nx + j] * x[(ny - 1) * nx + j])
-                .sum();
-            let imbalance = cg::sum(r);
-            imbalance.abs() / (opts.tol * q_out.abs())
+    let direct = match opts.solver {
+        Solver::Auto => n_unknowns <= DIRECT_MAX_UNKNOWNS,
+        Solver::Cholesky => true,
+        Solver::Multigrid => false,
+    };
+    let (system, outcome, levels) = if direct {
+        direct::solve(&fine, &rhs, &mut x, 2)?;
+        let mut r = vec![0.0; n];
+        fine.residual(&x, &rhs, &mut r);
+        let bb = cg::dot(&rhs, &rhs);
+        let residual = if bb > 0.0 {
+            (cg::dot(&r, &r) / bb).sqrt()
+        } else {
+            0.0
         };
-        cg::pcg(
-            &apply,
-            &mut pre,
-            &balanced,
-            &rhs,
-            &mut x,
-            opts.tol,
-            max_iter,
-            opts.should_stop,
-        )?
+        let outcome = cg::Outcome {
+            iterations: 0,
+            residual,
+        };
+        (System::Plain(fine), outcome, 0)
+    } else {
+        let mg = Multigrid::new(fine);
+        let levels = mg.n_levels();
+        let outcome = {
+            let mut work = vec![0.0; n];
+            let apply = |v: &[f64], out: &mut [f64]| mg.fine().apply(v, out);
+            let mut pre = |r: &[f64], z: &mut [f64]| mg.apply(r, z, &mut work);
+            // Σ r = Q_in − Q_out: go on until the inlet and outlet flow rates agree to
+            // `tol` too, or round-off stops the progress.
+            let st = mg.fine();
+            let balanced = |x: &[f64], r: &[f64]| {
+                let q_out: f64 = (0..nx)
+                    .map(|j| st.dir[(ny - 1) * nx + j] * x[(ny - 1) * nx + j])
+                    .sum();
+                let imbalance = cg::sum(r);
+                imbalance.abs() / (opts.tol * q_out.abs())
+            };
+            cg::pcg(
+                &apply,
+                &mut pre,
+                &balanced,
+                &rhs,
+                &mut x,
+                opts.tol,
+                max_iter,
+                opts.should_stop,
+            )?
+        };
+        (System::Multigrid(mg), outcome, levels)
     };
     if outcome.residual > 10.0 * opts.tol {
         return Err(Error::NotConverged {
@@ -389,7 +458,10 @@ fn solve_axis0(
             what: "reynolds-flow".into(),
         });
     }
-    let st = mg.fine();
+    let st = match &system {
+        System::Plain(st) => st,
+        System::Multigrid(mg) => mg.fine(),
+    };
     // Pressures: solution on spanning cells, reservoir pressure on one-sided clusters.
     let phi: Vec<f64> = (0..n)
         .into_par_iter()

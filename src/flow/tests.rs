@@ -75,6 +75,44 @@ fn parallel_plates_exact() {
 }
 
 #[test]
+fn parallel_plates_exact_multigrid() {
+    for &(ny, nx, periodic) in &[
+        (1, 1, false),
+        (7, 5, false),
+        (40, 33, true),
+        (65, 300, false),
+    ] {
+        for axis in 0..2 {
+            let g = 0.37;
+            let gap = vec![g; ny * nx];
+            let pr = problem(&gap, ny, nx, axis, periodic);
+            let sol = solve(
+                &pr,
+                &Options {
+                    solver: Solver::Multigrid,
+                    ..Options::default()
+                },
+            )
+            .unwrap();
+            let (w, l) = if axis == 0 {
+                (nx as f64 * pr.dx, ny as f64 * pr.dx)
+            } else {
+                (ny as f64 * pr.dx, nx as f64 * pr.dx)
+            };
+            let exact = w * g.powi(3) * pr.pressure_drop / (12.0 * pr.viscosity * l);
+            assert!(
+                rel(sol.flow_rate, exact) < 1e-12,
+                "{ny}x{nx}: {} vs {exact}",
+                sol.flow_rate
+            );
+            assert!(rel(sol.inlet_flow_rate, exact) < 1e-12);
+            assert!(rel(sol.conductance * pr.pressure_drop, exact) < 1e-12);
+            assert_eq!(sol.n_unknowns, ny * nx);
+        }
+    }
+}
+
+#[test]
 fn one_dimensional_gap_series_conductances() {
     let (ny, nx) = (50, 6);
     let gi: Vec<f64> = (0..ny).map(|i| 0.1 + 0.02 * i as f64).collect();
@@ -123,6 +161,43 @@ fn transposed_field_along_axis1_is_the_same_flow() {
 }
 
 #[test]
+fn transposed_field_along_axis1_is_the_same_flow_multigrid() {
+    let (ny, nx) = (37, 52);
+    let gap = random_gap(3, ny * nx, 0.3);
+    let gt: Vec<f64> = (0..ny * nx).map(|k| gap[(k % ny) * nx + k / ny]).collect();
+    for periodic in [false, true] {
+        let a = solve(
+            &problem(&gap, ny, nx, 0, periodic),
+            &Options {
+                solver: Solver::Multigrid,
+                ..Options::default()
+            },
+        )
+        .unwrap();
+        let b = solve(
+            &problem(&gt, nx, ny, 1, periodic),
+            &Options {
+                solver: Solver::Multigrid,
+                ..Options::default()
+            },
+        )
+        .unwrap();
+        assert_eq!(a.flow_rate.to_bits(), b.flow_rate.to_bits());
+        for i in 0..ny {
+            for j in 0..nx {
+                let (pa, pb) = (a.pressure[i * nx + j], b.pressure[j * ny + i]);
+                assert!(pa.to_bits() == pb.to_bits(), "{pa} {pb}");
+            }
+        }
+        for i in 0..=ny {
+            for j in 0..nx {
+                assert_eq!(a.flux_axis0[i * nx + j], b.flux_axis1[j * (ny + 1) + i]);
+            }
+        }
+    }
+}
+
+#[test]
 fn nothing_spans_gives_exactly_zero() {
     let (ny, nx) = (20, 15);
     let mut gap = random_gap(5, ny * nx, 0.1);
@@ -155,6 +230,24 @@ fn conservation_and_inlet_equals_outlet() {
     let (ny, nx) = (64, 64);
     let gap = random_gap(9, ny * nx, 0.35);
     let sol = solve(&problem(&gap, ny, nx, 0, false), &Options::default()).unwrap();
+    assert!(sol.flow_rate > 0.0);
+    assert!(rel(sol.inlet_flow_rate, sol.flow_rate) < 1e-9);
+    assert!(sol.conservation < 1e-9, "{}", sol.conservation);
+    assert!(sol.residual <= 1e-11);
+}
+
+#[test]
+fn conservation_and_inlet_equals_outlet_multigrid() {
+    let (ny, nx) = (64, 64);
+    let gap = random_gap(9, ny * nx, 0.35);
+    let sol = solve(
+        &problem(&gap, ny, nx, 0, false),
+        &Options {
+            solver: Solver::Multigrid,
+            ..Options::default()
+        },
+    )
+    .unwrap();
     assert!(sol.flow_rate > 0.0);
     assert!(rel(sol.inlet_flow_rate, sol.flow_rate) < 1e-9);
     assert!(sol.conservation < 1e-9, "{}", sol.conservation);
@@ -293,6 +386,38 @@ fn matches_dense_cholesky_reference() {
 }
 
 #[test]
+fn matches_dense_cholesky_reference_multigrid() {
+    for (seed, ny, nx, periodic, closed) in [
+        (1, 30, 41, false, 0.3),
+        (2, 45, 45, true, 0.35),
+        (4, 70, 20, false, 0.2),
+        (6, 3, 90, true, 0.4),
+    ] {
+        let gap = random_gap(seed, ny * nx, closed);
+        let pr = problem(&gap, ny, nx, 0, periodic);
+        let sol = solve(
+            &pr,
+            &Options {
+                solver: Solver::Multigrid,
+                ..Options::default()
+            },
+        )
+        .unwrap();
+        let (p, q) = dense_reference(&gap, ny, nx, periodic, pr.viscosity, pr.pressure_drop);
+        if q == 0.0 {
+            assert_eq!(sol.flow_rate, 0.0);
+            continue;
+        }
+        assert!(rel(sol.flow_rate, q) < 1e-10, "{} vs {q}", sol.flow_rate);
+        for k in 0..ny * nx {
+            if !p[k].is_nan() {
+                assert!((sol.pressure[k] - p[k]).abs() < 1e-10 * pr.pressure_drop);
+            }
+        }
+    }
+}
+
+#[test]
 fn same_bits_on_one_and_two_threads() {
     let (ny, nx) = (300, 260);
     let gap = random_gap(11, ny * nx, 0.3);
@@ -302,6 +427,36 @@ fn same_bits_on_one_and_two_threads() {
             .build()
             .unwrap();
         pool.install(|| solve(&problem(&gap, ny, nx, 0, true), &Options::default()).unwrap())
+    };
+    let (a, b) = (run(1), run(2));
+    assert_eq!(a.flow_rate.to_bits(), b.flow_rate.to_bits());
+    assert_eq!(a.iterations, b.iterations);
+    assert!(a
+        .pressure
+        .iter()
+        .zip(&b.pressure)
+        .all(|(x, y)| x.to_bits() == y.to_bits()));
+}
+
+#[test]
+fn same_bits_on_one_and_two_threads_multigrid() {
+    let (ny, nx) = (300, 260);
+    let gap = random_gap(11, ny * nx, 0.3);
+    let run = |t: usize| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(t)
+            .build()
+            .unwrap();
+        pool.install(|| {
+            solve(
+                &problem(&gap, ny, nx, 0, true),
+                &Options {
+                    solver: Solver::Multigrid,
+                    ..Options::default()
+                },
+            )
+            .unwrap()
+        })
     };
     let (a, b) = (run(1), run(2));
     assert_eq!(a.flow_rate.to_bits(), b.flow_rate.to_bits());
@@ -361,10 +516,14 @@ fn multigrid_keeps_iterations_low() {
     // Plain aggregation alone needs ~50 iterations on plates at 513² and grows with the
     // number of levels; the K-cycle keeps it flat.
     let (ny, nx) = (513, 513);
+    let mg = Options {
+        solver: Solver::Multigrid,
+        ..Options::default()
+    };
     let gap = vec![1.0; ny * nx];
-    let sol = solve(&problem(&gap, ny, nx, 0, false), &Options::default()).unwrap();
+    let sol = solve(&problem(&gap, ny, nx, 0, false), &mg).unwrap();
     assert!(sol.iterations <= 30, "{}", sol.iterations);
     let gap = random_gap(13, ny * nx, 0.0);
-    let sol = solve(&problem(&gap, ny, nx, 0, false), &Options::default()).unwrap();
+    let sol = solve(&problem(&gap, ny, nx, 0, false), &mg).unwrap();
     assert!(sol.iterations <= 80, "{}", sol.iterations);
 }
