@@ -59,7 +59,7 @@ class Flow:
             1, faces ``[:, 0]`` and ``[:, nx]`` are the same face.
         residual: final relative residual ``‖b − Ax‖₂/‖b‖₂`` of the linear system.
         conservation: largest net volume flux out of a cell relative to ``Q`` (0 if ``Q = 0``).
-        iterations: conjugate-gradient iterations.
+        iterations: conjugate-gradient iterations (0 for the Cholesky solve).
         n_unknowns: cells carrying an unknown pressure (those of the spanning clusters).
         axis, viscosity, pressure_drop, periodic, dx: the inputs.
         seconds: wall time of the solve.
@@ -127,6 +127,7 @@ def flow(
     tol: float = DEFAULT_TOL,
     max_iter: int | None = None,
     memory_limit: int | None = None,
+    solver: str = "auto",
 ) -> Flow:
     """Steady Reynolds flow through the gap (module docstring; docs/flow.md).
 
@@ -143,6 +144,11 @@ def flow(
         tol: relative residual ``‖b − Ax‖₂/‖b‖₂`` (default 1e-12).
         max_iter: conjugate-gradient iterations allowed (default 20000).
         memory_limit: bytes allowed (default 70 % of physical memory).
+        solver: ``"cholesky"`` (sparse Cholesky with two refinement steps: exact to
+            round-off even for the near-threshold gaps where iterations stall),
+            ``"multigrid"`` (conjugate gradients, aggregation-multigrid preconditioner, to
+            ``tol``), or ``"auto"`` (default: Cholesky up to 4 million cells with unknowns,
+            multigrid above).
 
     Raises:
         InvalidArgumentError: naming the argument (NaN or infinite gaps, negative gaps off
@@ -234,6 +240,11 @@ def flow(
             f"periodic: must be True, False or None, got {periodic!r}", argument="periodic"
         )
 
+    if solver not in ("auto", "cholesky", "multigrid"):
+        raise InvalidArgumentError(
+            f"solver: must be 'auto', 'cholesky' or 'multigrid', got {solver!r}",
+            argument="solver",
+        )
     limit = default_memory_limit() if memory_limit is None else int(memory_limit)
     res = _core.solve_reynolds_flow(
         gap,
@@ -246,6 +257,7 @@ def flow(
         tol=tol_f,
         max_iter=None if max_iter is None else int(max_iter),
         memory_limit=limit,
+        solver=solver,
     )
     ny, nx = gap.shape
     n_along, n_across = (ny, nx) if axis == 0 else (nx, ny)

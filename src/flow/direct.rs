@@ -29,9 +29,9 @@ pub fn solve(st: &Stencil, b: &[f64], x: &mut [f64], refine: usize) -> Result<()
     let n = ny * nx;
     let mut index = vec![usize::MAX; n];
     let mut cells = Vec::new();
-    for k in 0..n {
+    for (k, slot) in index.iter_mut().enumerate() {
         if st.active[k] {
-            index[k] = cells.len();
+            *slot = cells.len();
             cells.push(k);
         }
     }
