@@ -15,14 +15,16 @@ Inputs:
   the lowest quantile level from 60 % up that leaves a cluster spanning along axis 0; a
   contact solve at this size takes minutes, the flow problem has the same structure.
 
-leakpath: ``leakpath.flow`` (all cores; labelling, assembly, multigrid-preconditioned CG,
-fluxes). pyamg: ``smoothed_aggregation_solver(A)`` then ``solve(b, tol, accel="cg")`` on the
-same finite-volume matrix (assembled here with scipy.sparse on the spanning cells); its
-setup and solve are timed separately and together. scipy: ``spsolve`` on that matrix. All
-iterative solvers use the same relative residual ``‖b − Ax‖₂/‖b‖₂ ≤ 1e-12``; the flow rates
-are compared. Timings are medians of ``--repeats`` runs. Peak memory of ``leakpath.flow`` at
-the largest size is the ``ru_maxrss`` of a child process that loads the gap and solves,
-minus that of a child that only loads it.
+leakpath: ``leakpath.flow`` with its default solver (sparse Cholesky at these sizes) and
+with ``solver="multigrid"`` (aggregation-multigrid preconditioned CG), each including
+labelling, assembly and fluxes. pyamg: ``smoothed_aggregation_solver(A)`` then
+``solve(b, tol, accel="cg")`` on the same finite-volume matrix (assembled here with
+scipy.sparse on the spanning cells); its setup and solve are timed separately and
+together. scipy: ``spsolve`` on that matrix. The iterative solvers use the same relative
+residual ``‖b − Ax‖₂/‖b‖₂ ≤ 1e-12``; the flow rates are compared. Timings are medians of
+``--repeats`` runs. Peak memory of ``leakpath.flow`` at the largest size is the
+``ru_maxrss`` of a child process that loads the gap and solves, beside that of a child that
+only loads it.
 """
 
 from __future__ import annotations
@@ -31,7 +33,6 @@ import argparse
 import importlib.metadata
 import os
 import platform
-import resource
 import statistics
 import subprocess
 import sys
@@ -189,16 +190,19 @@ def median_time(fn, repeats: int):
     return statistics.median(times), out
 
 
-def peak_memory(gap_path: str) -> tuple[float, float]:
-    code_load = f"import numpy as np, leakpath; g = np.load({gap_path!r})"
-    code_flow = code_load + f"; f = leakpath.flow(g, dx=1.0, tol={TOL})"
-    rss = []
-    for code in (code_load, code_flow):
-        before = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
-        subprocess.run([sys.executable, "-c", code], check=True)
-        after = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
-        rss.append(max(after, before) / 1024)
-    return rss[0], rss[1]
+def peak_memory(gap_path: str, periodic: bool) -> tuple[float, float]:
+    """Peak RSS (MiB) of a child that loads the gap, and of one that also solves the flow."""
+    report = "import resource; print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)"
+    load = f"import numpy as np, leakpath; g = np.load({gap_path!r})"
+    solve = f"; f = leakpath.flow(g, dx=1.0, tol={TOL}, periodic={periodic})"
+    out = []
+    for code in (load, load + solve):
+        run = subprocess.run(
+            [sys.executable, "-c", f"{code}; {report}"], check=True, capture_output=True,
+            text=True,
+        )
+        out.append(int(run.stdout.split()[-1]) / 1024)
+    return out[0], out[1]
 
 
 def main() -> None:
@@ -207,6 +211,7 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--pyamg-max", type=int, default=1025, help="largest size given to pyamg")
     ap.add_argument("--pyamg-repeats", type=int, default=None, help="default: --repeats")
+    ap.add_argument("--multigrid-max", type=int, default=513, help="largest size for multigrid")
     ap.add_argument("--spsolve-max", type=int, default=1025, help="largest size for spsolve")
     ap.add_argument("--out", type=Path, default=Path("benchmarks/results/flow.md"))
     args = ap.parse_args()
@@ -241,8 +246,17 @@ def main() -> None:
             args.repeats,
         )
         q = f.flow_rate
-        rows = [("leakpath.flow", tl, f.iterations, q)]
+        rows = [("leakpath.flow (cholesky)", tl, f.iterations, q)]
         print(f"  leakpath {tl:.3f} s, {f.iterations} it, Q = {q:.12e}", flush=True)
+        if n <= args.multigrid_max:
+            tm, fm = median_time(
+                lambda g=gap, c=contact, w=periodic: leakpath.flow(
+                    g, dx=1.0, contact=c, tol=TOL, periodic=w, solver="multigrid"
+                ),
+                args.pyamg_repeats or args.repeats,
+            )
+            rows.append(("leakpath.flow (multigrid)", tm, fm.iterations, fm.flow_rate))
+            print(f"  leakpath multigrid {tm:.3f} s, {fm.iterations} it", flush=True)
         if n <= args.pyamg_max or n <= args.spsolve_max:
             A, b, w = assemble(gap, contact, periodic)
         if n <= args.pyamg_max:
@@ -272,6 +286,13 @@ def main() -> None:
                 f"| {n}² | {what} | {f.n_unknowns} | {name} | {t:.3f} | "
                 f"{'' if it is None else it} | {qs_} | {diff} |"
             )
+        for other in ("scipy spsolve",):
+            t_other = [t for name, t, _, _ in rows if name == other]
+            if t_other:
+                lines.append(
+                    f"| | | | **leakpath (cholesky) speed-up over {other}** | "
+                    f"{t_other[0] / tl:.2f}× | | | |"
+                )
         speed = [t for name, t, _, _ in rows if name == "pyamg SA setup + solve"]
         if speed:
             lines.append(f"| | | | **leakpath speed-up over pyamg (setup + solve)** | "
@@ -283,7 +304,7 @@ def main() -> None:
             with tempfile.TemporaryDirectory() as d:
                 path = os.path.join(d, "gap.npy")
                 np.save(path, np.where(contact, 0.0, gap))
-                base, peak = peak_memory(path)
+                base, peak = peak_memory(path, periodic)
             mem_line = (
                 f"Peak memory at {n}² (ru_maxrss of a child process): load only {base:.0f} MiB, "
                 f"load + leakpath.flow {peak:.0f} MiB, so the solve adds {peak - base:.0f} MiB "
