@@ -153,15 +153,18 @@ def test_nothing_spans_gives_exactly_zero():
     assert np.all(f.pressure[0][open0] == 1.0)
 
 
+@pytest.mark.parametrize("solver", ["cholesky", "multigrid"])
 @pytest.mark.parametrize("seed,shape,closed,periodic", [
     (3, (40, 40), 0.3, False),
     (4, (64, 48), 0.35, True),
     (5, (25, 90), 0.2, False),
 ])
-def test_random_gap_matches_spsolve(seed, shape, closed, periodic):
+def test_random_gap_matches_spsolve(seed, shape, closed, periodic, solver):
     gap = _random_gap(seed, shape, closed)
     eta, dp = 1.3, 2.0
-    f = leakpath.flow(gap, dx=0.1, viscosity=eta, pressure_drop=dp, periodic=periodic)
+    f = leakpath.flow(
+        gap, dx=0.1, viscosity=eta, pressure_drop=dp, periodic=periodic, solver=solver
+    )
     p, q = _reference(gap, gap <= 0, dp, eta, periodic)
     assert q > 0
     assert f.flow_rate == pytest.approx(q, rel=1e-10)
@@ -171,13 +174,14 @@ def test_random_gap_matches_spsolve(seed, shape, closed, periodic):
     assert f.conservation <= 1e-9
 
 
+@pytest.mark.parametrize("solver", ["auto", "cholesky", "multigrid"])
 @pytest.mark.parametrize("boundary", ["free", "periodic"])
-def test_contact_gap_matches_spsolve(boundary):
+def test_contact_gap_matches_spsolve(boundary, solver):
     s = leakpath.spectral(64, 0.8, seed=7, rms_height=1.0)
     st = leakpath.solve(s, 0.35 * (s.heights.max() - s.heights.min()), solver="polonsky-keer",
                         boundary=boundary)
     assert 0.05 < st.contact_fraction < 0.6
-    f = st.flow(viscosity=2.0, pressure_drop=3.0)
+    f = st.flow(viscosity=2.0, pressure_drop=3.0, solver=solver)
     gap = np.maximum(st.gap, 0.0)
     p, q = _reference(gap, st.contact, 3.0, 2.0, boundary == "periodic")
     assert f.periodic == (boundary == "periodic")
@@ -227,6 +231,7 @@ def test_pressure_drop_and_viscosity_scale_linearly():
     ({"tol": 0.0}, "tol"),
     ({"periodic": "yes"}, "periodic"),
     ({"max_iter": 0}, "max_iter"),
+    ({"solver": "lu"}, "solver"),
     ({"contact": np.zeros((3, 3), dtype=bool)}, "contact"),
     ({"contact": np.zeros((8, 8))}, "contact"),
 ])
@@ -263,7 +268,7 @@ def test_missing_dx_and_too_large():
 def test_not_converged():
     gap = _random_gap(9, (128, 128), 0.3)
     with pytest.raises(leakpath.errors.NotConvergedError):
-        leakpath.flow(gap, dx=1.0, max_iter=1)
+        leakpath.flow(gap, dx=1.0, max_iter=1, solver="multigrid")
 
 
 def test_repr_is_short():
