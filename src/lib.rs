@@ -7,6 +7,7 @@
 pub mod alloc;
 pub mod clusters;
 pub mod error;
+pub mod flow;
 pub mod influence;
 pub mod nnls;
 pub mod operator;

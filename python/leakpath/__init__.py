@@ -9,6 +9,7 @@ from . import _validate
 from ._core import __version__
 from ._core import kernel_table as _kernel_table
 from .contact import ContactProblem, ContactState, solve
+from .flow import Flow, flow
 from .moments import Moments, nayak_moments, rms_height, rms_slope
 from .percolation import Percolation, percolation
 from .surfaces import Surface, load, rmd, spectral
@@ -19,10 +20,12 @@ __all__ = [
     "__version__",
     "ContactProblem",
     "ContactState",
+    "Flow",
     "Moments",
     "Percolation",
     "PercolationThreshold",
     "SweepResult",
+    "flow",
     "percolation",
     "percolation_threshold",
     "sweep",

@@ -141,3 +141,35 @@ def classify_clusters(
     ulps), ``spanning_area``, ``dead_end_area``, ``trapped_area``, ``free_area`` (cells),
     ``n_spanning``, ``n_dead_end``, ``n_trapped``.
     """
+
+def solve_reynolds_flow(
+    gap: npt.NDArray[np.float64],
+    dx: float,
+    contact: npt.NDArray[np.bool_] | None = None,
+    axis: int = 0,
+    viscosity: float = 1.0,
+    pressure_drop: float = 1.0,
+    periodic: bool = False,
+    tol: float = 1e-12,
+    max_iter: int | None = None,
+    memory_limit: int | None = None,
+    solver: _Literal["auto", "cholesky", "multigrid"] = "auto",
+) -> dict[str, _Any]:
+    """Steady Reynolds flow ``∇·(g³/(12η) ∇p) = 0`` through the gap (docs/flow.md).
+
+    Cell-centred finite volumes, harmonic-mean faces, reservoirs at ``pressure_drop`` (inlet,
+    before the first index along ``axis``) and 0 (outlet) half a cell from the boundary
+    cells; no-flux side walls, or wrap across the flow with ``periodic``. Closed cells:
+    ``contact`` where given, else ``gap ≤ 0``. ``solver``: "cholesky" (sparse Cholesky, two
+    refinement steps), "multigrid" (conjugate gradients with an aggregation multigrid
+    preconditioner to ``‖b − Ax‖/‖b‖ ≤ tol`` and ``|Q_in − Q_out| ≤ tol·|Q_out|`` unless
+    round-off stalls it first) or "auto" (Cholesky up to 4 million unknowns). Returns a
+    dict: ``pressure`` (ny, nx; NaN on closed cells and on clusters joined to no
+    reservoir), ``flux_axis0`` (ny + 1, nx),
+    ``flux_axis1`` (ny, nx + 1) (volume per time through each face, positive towards
+    increasing index), ``flow_rate`` (outlet), ``inlet_flow_rate``, ``conductance``
+    (``Q/Δp``), ``residual``, ``conservation`` (largest net cell flux / Q), ``iterations``,
+    ``n_unknowns``, ``levels``, ``seconds``. ``InvalidArgumentError`` for bad input,
+    ``NotConvergedError`` past ``max_iter`` (default 20000), ``ProblemTooLargeError`` above
+    ``memory_limit`` bytes. The GIL is released; Ctrl-C raises ``KeyboardInterrupt``.
+    """

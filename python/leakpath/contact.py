@@ -30,6 +30,7 @@ from .errors import InvalidArgumentError
 from .surfaces import Surface
 
 if TYPE_CHECKING:
+    from .flow import Flow
     from .percolation import Percolation
 
 Boundary = Literal["free", "periodic"]
@@ -199,6 +200,12 @@ class ContactState:
             "kkt": self.kkt,
             "seconds": self.seconds,
         }
+
+    def flow(self, **kw: Any) -> Flow:
+        """Leak rate: Reynolds flow through this gap (see :func:`leakpath.flow.flow`)."""
+        from .flow import flow
+
+        return flow(self, **kw)
 
 
 def _as_surface(surface: Surface | np.ndarray, dx: float | None) -> Surface:

@@ -1,0 +1,285 @@
+"""Leak rate: steady incompressible Reynolds flow through the gap of a contact.
+
+Conventions (docs/flow.md):
+
+* ``∇·(g³/(12η) ∇p) = 0`` on the free cells; contact cells are impermeable.
+* Cell-centred finite volumes on the surface grid: cell conductivity ``c = g³/(12η)``, face
+  conductance the harmonic mean ``2c₁c₂/(c₁ + c₂)`` (0 across contact), flux through a face
+  ``q = c_face (p₁ − p₂)`` (volume per time; the face width ``dx`` and the centre distance
+  ``dx`` cancel).
+* Flow along ``axis``: inlet reservoir at ``pressure_drop`` before the first index, outlet at
+  0 after the last one, each half a cell from the boundary cells' centres (face conductance
+  ``2c``). Side walls carry no flux, or wrap when ``periodic``.
+* Unknowns on the clusters (4-connectivity, as :func:`leakpath.percolation`) that join inlet
+  and outlet; clusters touching only the inlet sit at ``Δp``, only the outlet at 0, others
+  have no pressure (NaN). ``Q = 0`` exactly when nothing spans.
+* Parallel plates of gap ``g``: ``Q = W g³ Δp / (12 η L)``, ``W`` the width across the flow,
+  ``L`` the length along it.
+
+Derived quantities: conductance ``Q/Δp``; permeability ``K = Q η L / (W Δp)`` (length²·length:
+the gap permeability with η taken out, ``g³/12`` for plates, so ``Q/W = (K/η) Δp/L``);
+hydraulic aperture ``(12 K)^{1/3}`` (``g`` for plates).
+"""
+
+from __future__ import annotations
+
+import numbers
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from . import _core
+from .errors import InvalidArgumentError
+
+__all__ = ["DEFAULT_TOL", "Flow", "flow"]
+
+#: Default relative residual ``‖b − Ax‖₂/‖b‖₂`` (also the aimed inlet/outlet agreement).
+DEFAULT_TOL = 1e-12
+
+
+@dataclass(frozen=True, eq=False)
+class Flow:
+    """The flow through the gap for one pressure drop along one axis.
+
+    Attributes:
+        flow_rate: volume flow rate ``Q`` through the outlet (length³/time).
+        inlet_flow_rate: volume flow rate through the inlet (equals ``Q`` to round-off).
+        conductance: ``Q/Δp`` (computed from the solution at unit ``Δp``; defined for
+            ``Δp = 0`` too).
+        permeability: ``K = conductance·η·L/W`` (length³ per unit length of width; ``g³/12``
+            for parallel plates of gap ``g``), independent of ``η`` and ``Δp``.
+        hydraulic_aperture: ``(12 K)^{1/3}`` (length): the gap of the parallel plates with
+            the same conductance.
+        pressure: pressure field (the gap's shape); NaN on contact cells, on closed cells
+            (``g = 0``) and on clusters joined to neither reservoir (trapped ones included).
+        flux_axis0: volume flux through the faces normal to axis 0, shape ``(ny + 1, nx)``:
+            face ``[i, j]`` lies before cell ``(i, j)``; positive towards increasing ``i``.
+        flux_axis1: the same normal to axis 1, shape ``(ny, nx + 1)``; with wrap across axis
+            1, faces ``[:, 0]`` and ``[:, nx]`` are the same face.
+        residual: final relative residual ``‖b − Ax‖₂/‖b‖₂`` of the linear system.
+        conservation: largest net volume flux out of a cell relative to ``Q`` (0 if ``Q = 0``).
+        iterations: conjugate-gradient iterations (0 for the Cholesky solve).
+        n_unknowns: cells carrying an unknown pressure (those of the spanning clusters).
+        axis, viscosity, pressure_drop, periodic, dx: the inputs.
+        seconds: wall time of the solve.
+    """
+
+    flow_rate: float
+    inlet_flow_rate: float
+    conductance: float
+    permeability: float
+    hydraulic_aperture: float
+    pressure: np.ndarray = field(repr=False)
+    flux_axis0: np.ndarray = field(repr=False)
+    flux_axis1: np.ndarray = field(repr=False)
+    residual: float
+    conservation: float
+    iterations: int
+    n_unknowns: int
+    axis: int
+    viscosity: float
+    pressure_drop: float
+    periodic: bool
+    dx: float
+    seconds: float
+
+    @property
+    def percolates(self) -> bool:
+        """True when fluid crosses from inlet to outlet (``Q ≠ 0`` at ``Δp ≠ 0``)."""
+        return self.n_unknowns > 0
+
+    def __repr__(self) -> str:
+        ny, nx = self.pressure.shape
+        return (
+            f"Flow(Q={self.flow_rate:.6g}, conductance={self.conductance:.6g}, "
+            f"K={self.permeability:.6g}, aperture={self.hydraulic_aperture:.6g}, "
+            f"axis={self.axis}, grid={ny}x{nx}, unknowns={self.n_unknowns}, "
+            f"iterations={self.iterations}, residual={self.residual:.1e})"
+        )
+
+
+def _number(name: str, value: Any, *, positive: bool = False) -> float:
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
+        raise InvalidArgumentError(
+            f"{name}: must be a real number, got {value!r}; pass a float", argument=name
+        )
+    v = float(value)
+    if not np.isfinite(v) or (positive and v <= 0):
+        what = "a positive finite number" if positive else "a finite number"
+        raise InvalidArgumentError(f"{name}: must be {what}, got {value!r}", argument=name)
+    return v
+
+
+def _is_state(obj: Any) -> bool:
+    return all(hasattr(obj, name) for name in ("gap", "contact", "dx"))
+
+
+def flow(
+    state_or_gap: Any,
+    *,
+    axis: int = 0,
+    viscosity: float = 1.0,
+    pressure_drop: float = 1.0,
+    dx: float | None = None,
+    periodic: bool | None = None,
+    contact: np.ndarray | None = None,
+    tol: float = DEFAULT_TOL,
+    max_iter: int | None = None,
+    memory_limit: int | None = None,
+    solver: str = "auto",
+) -> Flow:
+    """Steady Reynolds flow through the gap (module docstring; docs/flow.md).
+
+    Args:
+        state_or_gap: a solved :class:`leakpath.ContactState` (its ``gap``, ``contact``
+            (``p > 0``), ``dx`` and ``boundary`` are used) or a 2-D array of gaps (length).
+        axis: flow direction, 0 (default) or 1.
+        viscosity: dynamic viscosity ``η > 0``.
+        pressure_drop: ``Δp = p_inlet − p_outlet`` (finite; negative reverses the flow).
+        dx: grid spacing; required for a gap array, taken from a state.
+        periodic: wrap across the flow; ``None``: the state's ``boundary == "periodic"``
+            (no wrap for a gap array).
+        contact: contact mask for a gap array (bool, the gap's shape); default ``gap ≤ 0``.
+        tol: relative residual ``‖b − Ax‖₂/‖b‖₂`` (default 1e-12).
+        max_iter: conjugate-gradient iterations allowed (default 20000).
+        memory_limit: bytes allowed (default 70 % of physical memory).
+        solver: ``"cholesky"`` (sparse Cholesky with two refinement steps: exact to
+            round-off even for the near-threshold gaps where iterations stall),
+            ``"multigrid"`` (conjugate gradients, aggregation-multigrid preconditioner, to
+            ``tol``), or ``"auto"`` (default: Cholesky up to 4 million cells with unknowns,
+            multigrid above).
+
+    Raises:
+        InvalidArgumentError: naming the argument (NaN or infinite gaps, negative gaps off
+            contact, wrong shapes, ``η ≤ 0``, non-finite ``Δp``, bools or strings given as
+            numbers, a bad ``axis``).
+        NotConvergedError: ``max_iter`` reached.
+        ProblemTooLargeError: the solve would need more than ``memory_limit`` bytes.
+    """
+    from .contact import default_memory_limit
+
+    if isinstance(axis, (bool, np.bool_)) or not isinstance(axis, numbers.Integral):
+        raise InvalidArgumentError(f"axis: must be 0 or 1, got {axis!r}", argument="axis")
+    if int(axis) not in (0, 1):
+        raise InvalidArgumentError(f"axis: must be 0 or 1, got {axis!r}", argument="axis")
+    axis = int(axis)
+    eta = _number("viscosity", viscosity, positive=True)
+    dp = _number("pressure_drop", pressure_drop)
+    tol_f = _number("tol", tol, positive=True)
+    if tol_f >= 1:
+        raise InvalidArgumentError(f"tol: must be in (0, 1), got {tol!r}", argument="tol")
+    if max_iter is not None and (
+        isinstance(max_iter, (bool, np.bool_))
+        or not isinstance(max_iter, numbers.Integral)
+        or max_iter < 1
+    ):
+        raise InvalidArgumentError(
+            f"max_iter: must be a positive integer or None, got {max_iter!r}",
+            argument="max_iter",
+        )
+
+    boundary = None
+    if _is_state(state_or_gap):
+        state = state_or_gap
+        if dx is not None:
+            raise InvalidArgumentError(
+                "dx: taken from the contact state; pass a gap array to set it", argument="dx"
+            )
+        if contact is not None:
+            raise InvalidArgumentError(
+                "contact: taken from the contact state (p > 0); pass a gap array to set it",
+                argument="contact",
+            )
+        # A solver's gap may dip below 0 by its tolerance (KKT ~1e-11 h_s): clip it.
+        gap_in = np.maximum(np.asarray(state.gap, dtype=np.float64), 0.0)
+        contact, dx = state.contact, state.dx
+        boundary = getattr(state, "boundary", None)
+    else:
+        gap_in = state_or_gap
+        if dx is None:
+            raise InvalidArgumentError(
+                "dx: the grid spacing is required when a gap array is given; pass dx=",
+                argument="dx",
+            )
+    dx_f = _number("dx", dx, positive=True)
+
+    gap_arr = np.asarray(gap_in)
+    if gap_arr.dtype == np.bool_ or not (
+        np.issubdtype(gap_arr.dtype, np.floating) or np.issubdtype(gap_arr.dtype, np.integer)
+    ):
+        raise InvalidArgumentError(
+            f"gap: must be a 2-D array of real numbers, got dtype {gap_arr.dtype}",
+            argument="gap",
+        )
+    gap = np.ascontiguousarray(gap_arr, dtype=np.float64)
+    if gap.ndim != 2 or gap.size == 0:
+        raise InvalidArgumentError(
+            f"gap: must be a non-empty 2-D array, got shape {gap.shape}", argument="gap"
+        )
+    if contact is not None:
+        contact = np.asarray(contact)
+        if contact.dtype != np.bool_:
+            raise InvalidArgumentError(
+                f"contact: must be a boolean mask (e.g. pressure > 0), got dtype {contact.dtype}",
+                argument="contact",
+            )
+        if contact.shape != gap.shape:
+            raise InvalidArgumentError(
+                f"contact: must have the gap's shape {gap.shape}, got {contact.shape}",
+                argument="contact",
+            )
+        contact = np.ascontiguousarray(contact)
+
+    if periodic is None:
+        wrap = boundary == "periodic"
+    elif isinstance(periodic, (bool, np.bool_)):
+        wrap = bool(periodic)
+    else:
+        raise InvalidArgumentError(
+            f"periodic: must be True, False or None, got {periodic!r}", argument="periodic"
+        )
+
+    if solver not in ("auto", "cholesky", "multigrid"):
+        raise InvalidArgumentError(
+            f"solver: must be 'auto', 'cholesky' or 'multigrid', got {solver!r}",
+            argument="solver",
+        )
+    limit = default_memory_limit() if memory_limit is None else int(memory_limit)
+    res = _core.solve_reynolds_flow(
+        gap,
+        dx_f,
+        contact=contact,
+        axis=axis,
+        viscosity=eta,
+        pressure_drop=dp,
+        periodic=wrap,
+        tol=tol_f,
+        max_iter=None if max_iter is None else int(max_iter),
+        memory_limit=limit,
+        solver=solver,
+    )
+    ny, nx = gap.shape
+    n_along, n_across = (ny, nx) if axis == 0 else (nx, ny)
+    conductance = float(res["conductance"])
+    permeability = conductance * eta * n_along / n_across
+    return Flow(
+        flow_rate=float(res["flow_rate"]),
+        inlet_flow_rate=float(res["inlet_flow_rate"]),
+        conductance=conductance,
+        permeability=permeability,
+        hydraulic_aperture=float(np.cbrt(12.0 * permeability)),
+        pressure=res["pressure"],
+        flux_axis0=res["flux_axis0"],
+        flux_axis1=res["flux_axis1"],
+        residual=float(res["residual"]),
+        conservation=float(res["conservation"]),
+        iterations=int(res["iterations"]),
+        n_unknowns=int(res["n_unknowns"]),
+        axis=axis,
+        viscosity=eta,
+        pressure_drop=dp,
+        periodic=wrap,
+        dx=dx_f,
+        seconds=float(res["seconds"]),
+    )

@@ -1,0 +1,184 @@
+//! The finite-volume system of the Reynolds equation on the connected cells.
+//!
+//! The grid is row-major `ny × nx`, flow along axis 0 (rows): the inlet reservoir sits half a
+//! cell before row 0, the outlet half a cell after row `ny − 1`. With `periodic`, column
+//! `nx − 1` neighbours column 0. The operator is the 5-point stencil
+//!
+//! ```text
+//! (A x)_k = d_k x_k − Σ_faces c_f x_neighbour,   d_k = Σ_faces c_f + dir_k,
+//! ```
+//!
+//! where `c_f` are face conductances and `dir_k` the conductance of the face to a reservoir
+//! (`2c` on rows 0 and `ny − 1`). Cells without unknowns keep `d = 1` and no faces: their
+//! equation is `x = 0`, decoupled from the rest, so one structured layout serves every level.
+
+use rayon::prelude::*;
+
+/// Rows per parallel task: large enough that a task costs far more than handing it out.
+pub(crate) const ROWS_PER_TASK: usize = 8;
+
+/// A symmetric 5-point operator on a structured grid (one multigrid level).
+#[derive(Clone, Debug)]
+pub struct Stencil {
+    pub ny: usize,
+    pub nx: usize,
+    pub periodic: bool,
+    /// Face between `(i, j)` and `(i, j + 1)` (`(i, 0)` at `j = nx − 1` when periodic, else 0).
+    pub e: Vec<f64>,
+    /// Face between `(i, j)` and `(i + 1, j)`; 0 on the last row.
+    pub s: Vec<f64>,
+    /// Conductance to the reservoirs (Dirichlet part of the diagonal).
+    pub dir: Vec<f64>,
+    /// Diagonal; 1 on cells without unknowns.
+    pub d: Vec<f64>,
+    /// Cells carrying an unknown.
+    pub active: Vec<bool>,
+}
+
+impl Stencil {
+    /// Index of the west neighbour of column `j` (`None` at a wall).
+    #[inline(always)]
+    pub fn west(&self, j: usize) -> Option<usize> {
+        if j > 0 {
+            Some(j - 1)
+        } else if self.periodic && self.nx > 1 {
+            Some(self.nx - 1)
+        } else {
+            None
+        }
+    }
+
+    /// Fills `d` from the faces and `dir`; cells with nothing attached become inactive.
+    pub fn finish_diagonal(&mut self) {
+        let (ny, nx) = (self.ny, self.nx);
+        let (e, s, dir) = (&self.e, &self.s, &self.dir);
+        let periodic = self.periodic;
+        self.d
+            .par_chunks_mut(nx)
+            .zip(self.active.par_chunks_mut(nx))
+            .enumerate()
+            .for_each(|(i, (drow, arow))| {
+                for j in 0..nx {
+                    let k = i * nx + j;
+                    let mut sum = dir[k] + e[k] + s[k];
+                    if j > 0 {
+                        sum += e[k - 1];
+                    } else if periodic && nx > 1 {
+                        sum += e[k + nx - 1];
+                    }
+                    if i > 0 {
+                        sum += s[k - nx];
+                    }
+                    arow[j] = sum > 0.0;
+                    drow[j] = if sum > 0.0 { sum } else { 1.0 };
+                }
+            });
+        debug_assert_eq!(self.d.len(), ny * nx);
+    }
+
+    /// `y = A x`.
+    pub fn apply(&self, x: &[f64], y: &mut [f64]) {
+        let nx = self.nx;
+        y.par_chunks_mut(nx)
+            .enumerate()
+            .with_min_len(ROWS_PER_TASK)
+            .for_each(|(i, yrow)| self.apply_row(i, x, yrow));
+    }
+
+    #[inline(always)]
+    #[allow(clippy::needless_range_loop)]
+    fn apply_row(&self, i: usize, x: &[f64], yrow: &mut [f64]) {
+        let (ny, nx) = (self.ny, self.nx);
+        let base = i * nx;
+        for j in 0..nx {
+            let k = base + j;
+            let mut v = self.d[k] * x[k];
+            if j + 1 < nx {
+                v -= self.e[k] * x[k + 1];
+            } else if self.periodic && nx > 1 {
+                v -= self.e[k] * x[base];
+            }
+            if let Some(w) = self.west(j) {
+                v -= self.e[base + w] * x[base + w];
+            }
+            if i + 1 < ny {
+                v -= self.s[k] * x[k + nx];
+            }
+            if i > 0 {
+                v -= self.s[k - nx] * x[k - nx];
+            }
+            yrow[j] = v;
+        }
+    }
+
+    /// `r = b − A x`.
+    pub fn residual(&self, x: &[f64], b: &[f64], r: &mut [f64]) {
+        let nx = self.nx;
+        r.par_chunks_mut(nx)
+            .enumerate()
+            .with_min_len(ROWS_PER_TASK)
+            .for_each(|(i, rrow)| {
+                self.apply_row(i, x, rrow);
+                for (j, v) in rrow.iter_mut().enumerate() {
+                    *v = b[i * nx + j] - *v;
+                }
+            });
+    }
+}
+
+/// Harmonic mean of two cell conductances, `2 c1 c2 / (c1 + c2)`; 0 when either is 0.
+#[inline(always)]
+pub fn harmonic(c1: f64, c2: f64) -> f64 {
+    if c1 > 0.0 && c2 > 0.0 {
+        2.0 * c1 * c2 / (c1 + c2)
+    } else {
+        0.0
+    }
+}
+
+/// The fine-level operator for cell conductances `c` (0 on cells without unknowns) with
+/// reservoirs on rows 0 and `ny − 1`; `rhs` gets the inlet reservoir at unit pressure.
+pub fn fine_stencil(c: &[f64], ny: usize, nx: usize, periodic: bool) -> (Stencil, Vec<f64>) {
+    let n = ny * nx;
+    let mut e = vec![0.0; n];
+    let mut s = vec![0.0; n];
+    let mut dir = vec![0.0; n];
+    let mut rhs = vec![0.0; n];
+    e.par_chunks_mut(nx)
+        .zip(s.par_chunks_mut(nx))
+        .zip(dir.par_chunks_mut(nx).zip(rhs.par_chunks_mut(nx)))
+        .enumerate()
+        .for_each(|(i, ((erow, srow), (drow, brow)))| {
+            let base = i * nx;
+            for j in 0..nx {
+                let k = base + j;
+                if j + 1 < nx {
+                    erow[j] = harmonic(c[k], c[k + 1]);
+                } else if periodic && nx > 1 {
+                    erow[j] = harmonic(c[k], c[base]);
+                }
+                if i + 1 < ny {
+                    srow[j] = harmonic(c[k], c[k + nx]);
+                }
+                if i == 0 {
+                    drow[j] += 2.0 * c[k];
+                    brow[j] = 2.0 * c[k];
+                }
+                if i + 1 == ny {
+                    drow[j] += 2.0 * c[k];
+                }
+            }
+        });
+    let mut st = Stencil {
+        ny,
+        nx,
+        periodic,
+        e,
+        s,
+        dir,
+        d: vec![0.0; n],
+        active: vec![false; n],
+    };
+    st.finish_diagonal();
+    (st, rhs)
+}

@@ -1,0 +1,529 @@
+#![allow(clippy::needless_range_loop)]
+use super::*;
+use faer::prelude::Solve;
+use faer::{Mat, Side};
+
+fn lcg(seed: u64, n: usize) -> Vec<f64> {
+    let mut s = seed
+        .wrapping_mul(6364136223846793005)
+        .wrapping_add(1442695040888963407);
+    (0..n)
+        .map(|_| {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((s >> 11) as f64) / ((1u64 << 53) as f64)
+        })
+        .collect()
+}
+
+fn problem<'a>(gap: &'a [f64], ny: usize, nx: usize, axis: usize, periodic: bool) -> Problem<'a> {
+    Problem {
+        gap,
+        contact: None,
+        ny,
+        nx,
+        dx: 0.5,
+        axis,
+        viscosity: 2.0,
+        pressure_drop: 3.0,
+        periodic,
+    }
+}
+
+fn rel(a: f64, b: f64) -> f64 {
+    (a - b).abs() / b.abs()
+}
+
+/// Random gaps with about `closed` of the cells in contact (gap 0).
+fn random_gap(seed: u64, n: usize, closed: f64) -> Vec<f64> {
+    let u = lcg(seed, 2 * n);
+    (0..n)
+        .map(|k| if u[n + k] < closed { 0.0 } else { 0.05 + u[k] })
+        .collect()
+}
+
+#[test]
+fn parallel_plates_exact() {
+    for &(ny, nx, periodic) in &[
+        (1, 1, false),
+        (7, 5, false),
+        (40, 33, true),
+        (65, 300, false),
+    ] {
+        for axis in 0..2 {
+            let g = 0.37;
+            let gap = vec![g; ny * nx];
+            let pr = problem(&gap, ny, nx, axis, periodic);
+            let sol = solve(&pr, &Options::default()).unwrap();
+            let (w, l) = if axis == 0 {
+                (nx as f64 * pr.dx, ny as f64 * pr.dx)
+            } else {
+                (ny as f64 * pr.dx, nx as f64 * pr.dx)
+            };
+            let exact = w * g.powi(3) * pr.pressure_drop / (12.0 * pr.viscosity * l);
+            assert!(
+                rel(sol.flow_rate, exact) < 1e-12,
+                "{ny}x{nx}: {} vs {exact}",
+                sol.flow_rate
+            );
+            assert!(rel(sol.inlet_flow_rate, exact) < 1e-12);
+            assert!(rel(sol.conductance * pr.pressure_drop, exact) < 1e-12);
+            assert_eq!(sol.n_unknowns, ny * nx);
+        }
+    }
+}
+
+#[test]
+fn parallel_plates_exact_multigrid() {
+    for &(ny, nx, periodic) in &[
+        (1, 1, false),
+        (7, 5, false),
+        (40, 33, true),
+        (65, 300, false),
+    ] {
+        for axis in 0..2 {
+            let g = 0.37;
+            let gap = vec![g; ny * nx];
+            let pr = problem(&gap, ny, nx, axis, periodic);
+            let sol = solve(
+                &pr,
+                &Options {
+                    solver: Solver::Multigrid,
+                    ..Options::default()
+                },
+            )
+            .unwrap();
+            let (w, l) = if axis == 0 {
+                (nx as f64 * pr.dx, ny as f64 * pr.dx)
+            } else {
+                (ny as f64 * pr.dx, nx as f64 * pr.dx)
+            };
+            let exact = w * g.powi(3) * pr.pressure_drop / (12.0 * pr.viscosity * l);
+            assert!(
+                rel(sol.flow_rate, exact) < 1e-12,
+                "{ny}x{nx}: {} vs {exact}",
+                sol.flow_rate
+            );
+            assert!(rel(sol.inlet_flow_rate, exact) < 1e-12);
+            assert!(rel(sol.conductance * pr.pressure_drop, exact) < 1e-12);
+            assert_eq!(sol.n_unknowns, ny * nx);
+        }
+    }
+}
+
+#[test]
+fn one_dimensional_gap_series_conductances() {
+    let (ny, nx) = (50, 6);
+    let gi: Vec<f64> = (0..ny).map(|i| 0.1 + 0.02 * i as f64).collect();
+    let gap: Vec<f64> = (0..ny * nx).map(|k| gi[k / nx]).collect();
+    let pr = problem(&gap, ny, nx, 0, false);
+    let sol = solve(&pr, &Options::default()).unwrap();
+    let c: Vec<f64> = gi
+        .iter()
+        .map(|g| g.powi(3) / (12.0 * pr.viscosity))
+        .collect();
+    let mut r = 1.0 / (2.0 * c[0]) + 1.0 / (2.0 * c[ny - 1]);
+    for i in 0..ny - 1 {
+        r += (c[i] + c[i + 1]) / (2.0 * c[i] * c[i + 1]);
+    }
+    let exact = nx as f64 * pr.pressure_drop / r;
+    assert!(
+        rel(sol.flow_rate, exact) < 1e-12,
+        "{} vs {exact}",
+        sol.flow_rate
+    );
+    // No flux across the flow.
+    assert!(sol.flux_axis1.iter().all(|&v| v.abs() < 1e-14 * exact));
+}
+
+#[test]
+fn transposed_field_along_axis1_is_the_same_flow() {
+    let (ny, nx) = (37, 52);
+    let gap = random_gap(3, ny * nx, 0.3);
+    let gt: Vec<f64> = (0..ny * nx).map(|k| gap[(k % ny) * nx + k / ny]).collect();
+    for periodic in [false, true] {
+        let a = solve(&problem(&gap, ny, nx, 0, periodic), &Options::default()).unwrap();
+        let b = solve(&problem(&gt, nx, ny, 1, periodic), &Options::default()).unwrap();
+        assert_eq!(a.flow_rate.to_bits(), b.flow_rate.to_bits());
+        for i in 0..ny {
+            for j in 0..nx {
+                let (pa, pb) = (a.pressure[i * nx + j], b.pressure[j * ny + i]);
+                assert!(pa.to_bits() == pb.to_bits(), "{pa} {pb}");
+            }
+        }
+        for i in 0..=ny {
+            for j in 0..nx {
+                assert_eq!(a.flux_axis0[i * nx + j], b.flux_axis1[j * (ny + 1) + i]);
+            }
+        }
+    }
+}
+
+#[test]
+fn transposed_field_along_axis1_is_the_same_flow_multigrid() {
+    let (ny, nx) = (37, 52);
+    let gap = random_gap(3, ny * nx, 0.3);
+    let gt: Vec<f64> = (0..ny * nx).map(|k| gap[(k % ny) * nx + k / ny]).collect();
+    for periodic in [false, true] {
+        let a = solve(
+            &problem(&gap, ny, nx, 0, periodic),
+            &Options {
+                solver: Solver::Multigrid,
+                ..Options::default()
+            },
+        )
+        .unwrap();
+        let b = solve(
+            &problem(&gt, nx, ny, 1, periodic),
+            &Options {
+                solver: Solver::Multigrid,
+                ..Options::default()
+            },
+        )
+        .unwrap();
+        assert_eq!(a.flow_rate.to_bits(), b.flow_rate.to_bits());
+        for i in 0..ny {
+            for j in 0..nx {
+                let (pa, pb) = (a.pressure[i * nx + j], b.pressure[j * ny + i]);
+                assert!(pa.to_bits() == pb.to_bits(), "{pa} {pb}");
+            }
+        }
+        for i in 0..=ny {
+            for j in 0..nx {
+                assert_eq!(a.flux_axis0[i * nx + j], b.flux_axis1[j * (ny + 1) + i]);
+            }
+        }
+    }
+}
+
+#[test]
+fn nothing_spans_gives_exactly_zero() {
+    let (ny, nx) = (20, 15);
+    let mut gap = random_gap(5, ny * nx, 0.1);
+    for j in 0..nx {
+        gap[9 * nx + j] = 0.0;
+    }
+    let sol = solve(&problem(&gap, ny, nx, 0, true), &Options::default()).unwrap();
+    assert_eq!(sol.flow_rate, 0.0);
+    assert_eq!(sol.inlet_flow_rate, 0.0);
+    assert_eq!(sol.n_unknowns, 0);
+    assert!(sol
+        .flux_axis0
+        .iter()
+        .chain(&sol.flux_axis1)
+        .all(|&v| v == 0.0));
+    // Inlet side at Δp, outlet side at 0, the blocking row NaN.
+    for j in 0..nx {
+        if gap[j] > 0.0 {
+            assert_eq!(sol.pressure[j], 3.0);
+        }
+        if gap[(ny - 1) * nx + j] > 0.0 {
+            assert_eq!(sol.pressure[(ny - 1) * nx + j], 0.0);
+        }
+        assert!(sol.pressure[9 * nx + j].is_nan());
+    }
+}
+
+#[test]
+fn conservation_and_inlet_equals_outlet() {
+    let (ny, nx) = (64, 64);
+    let gap = random_gap(9, ny * nx, 0.35);
+    let sol = solve(&problem(&gap, ny, nx, 0, false), &Options::default()).unwrap();
+    assert!(sol.flow_rate > 0.0);
+    assert!(rel(sol.inlet_flow_rate, sol.flow_rate) < 1e-9);
+    assert!(sol.conservation < 1e-9, "{}", sol.conservation);
+    assert!(sol.residual <= 1e-11);
+}
+
+#[test]
+fn conservation_and_inlet_equals_outlet_multigrid() {
+    let (ny, nx) = (64, 64);
+    let gap = random_gap(9, ny * nx, 0.35);
+    let sol = solve(
+        &problem(&gap, ny, nx, 0, false),
+        &Options {
+            solver: Solver::Multigrid,
+            ..Options::default()
+        },
+    )
+    .unwrap();
+    assert!(sol.flow_rate > 0.0);
+    assert!(rel(sol.inlet_flow_rate, sol.flow_rate) < 1e-9);
+    assert!(sol.conservation < 1e-9, "{}", sol.conservation);
+    assert!(sol.residual <= 1e-11);
+}
+
+/// Dense reference: the same finite-volume system assembled cell by cell and solved with a
+/// dense Cholesky factor (faer).
+fn dense_reference(
+    gap: &[f64],
+    ny: usize,
+    nx: usize,
+    periodic: bool,
+    eta: f64,
+    dp: f64,
+) -> (Vec<f64>, f64) {
+    let n = ny * nx;
+    let c: Vec<f64> = gap.iter().map(|g| g.powi(3) / (12.0 * eta)).collect();
+    // Spanning cells by flood fill from the inlet, then from the outlet.
+    let flood = |seeds: Vec<usize>| {
+        let mut seen = vec![false; n];
+        let mut stack = seeds;
+        while let Some(k) = stack.pop() {
+            if seen[k] || c[k] <= 0.0 {
+                continue;
+            }
+            seen[k] = true;
+            let (i, j) = (k / nx, k % nx);
+            if i > 0 {
+                stack.push(k - nx);
+            }
+            if i + 1 < ny {
+                stack.push(k + nx);
+            }
+            if j > 0 {
+                stack.push(k - 1);
+            } else if periodic {
+                stack.push(k + nx - 1);
+            }
+            if j + 1 < nx {
+                stack.push(k + 1);
+            } else if periodic {
+                stack.push(k + 1 - nx);
+            }
+        }
+        seen
+    };
+    let from_in = flood((0..nx).collect());
+    let from_out = flood(((ny - 1) * nx..n).collect());
+    let idx: Vec<usize> = (0..n).filter(|&k| from_in[k] && from_out[k]).collect();
+    let mut pos = vec![usize::MAX; n];
+    for (m, &k) in idx.iter().enumerate() {
+        pos[k] = m;
+    }
+    let m = idx.len();
+    let mut a = Mat::<f64>::zeros(m, m);
+    let mut b = Mat::<f64>::zeros(m, 1);
+    let h = |c1: f64, c2: f64| {
+        if c1 > 0.0 && c2 > 0.0 {
+            2.0 * c1 * c2 / (c1 + c2)
+        } else {
+            0.0
+        }
+    };
+    for (r, &k) in idx.iter().enumerate() {
+        let (i, j) = (k / nx, k % nx);
+        let mut nbs = vec![];
+        if i > 0 {
+            nbs.push(k - nx);
+        }
+        if i + 1 < ny {
+            nbs.push(k + nx);
+        }
+        if j > 0 {
+            nbs.push(k - 1);
+        } else if periodic && nx > 1 {
+            nbs.push(k + nx - 1);
+        }
+        if j + 1 < nx {
+            nbs.push(k + 1);
+        } else if periodic && nx > 1 {
+            nbs.push(k + 1 - nx);
+        }
+        for q in nbs {
+            let cf = h(c[k], c[q]);
+            if cf > 0.0 {
+                a[(r, r)] += cf;
+                a[(r, pos[q])] -= cf;
+            }
+        }
+        if i == 0 {
+            a[(r, r)] += 2.0 * c[k];
+            b[(r, 0)] += 2.0 * c[k] * dp;
+        }
+        if i + 1 == ny {
+            a[(r, r)] += 2.0 * c[k];
+        }
+    }
+    let mut p = vec![f64::NAN; n];
+    let mut q = 0.0;
+    if m > 0 {
+        let x = a.llt(Side::Lower).unwrap().solve(&b);
+        for (r, &k) in idx.iter().enumerate() {
+            p[k] = x[(r, 0)];
+            if k / nx == ny - 1 {
+                q += 2.0 * c[k] * x[(r, 0)];
+            }
+        }
+    }
+    (p, q)
+}
+
+#[test]
+fn matches_dense_cholesky_reference() {
+    for (seed, ny, nx, periodic, closed) in [
+        (1, 30, 41, false, 0.3),
+        (2, 45, 45, true, 0.35),
+        (4, 70, 20, false, 0.2),
+        (6, 3, 90, true, 0.4),
+    ] {
+        let gap = random_gap(seed, ny * nx, closed);
+        let pr = problem(&gap, ny, nx, 0, periodic);
+        let sol = solve(&pr, &Options::default()).unwrap();
+        let (p, q) = dense_reference(&gap, ny, nx, periodic, pr.viscosity, pr.pressure_drop);
+        if q == 0.0 {
+            assert_eq!(sol.flow_rate, 0.0);
+            continue;
+        }
+        assert!(rel(sol.flow_rate, q) < 1e-10, "{} vs {q}", sol.flow_rate);
+        for k in 0..ny * nx {
+            if !p[k].is_nan() {
+                assert!((sol.pressure[k] - p[k]).abs() < 1e-10 * pr.pressure_drop);
+            }
+        }
+    }
+}
+
+#[test]
+fn matches_dense_cholesky_reference_multigrid() {
+    for (seed, ny, nx, periodic, closed) in [
+        (1, 30, 41, false, 0.3),
+        (2, 45, 45, true, 0.35),
+        (4, 70, 20, false, 0.2),
+        (6, 3, 90, true, 0.4),
+    ] {
+        let gap = random_gap(seed, ny * nx, closed);
+        let pr = problem(&gap, ny, nx, 0, periodic);
+        let sol = solve(
+            &pr,
+            &Options {
+                solver: Solver::Multigrid,
+                ..Options::default()
+            },
+        )
+        .unwrap();
+        let (p, q) = dense_reference(&gap, ny, nx, periodic, pr.viscosity, pr.pressure_drop);
+        if q == 0.0 {
+            assert_eq!(sol.flow_rate, 0.0);
+            continue;
+        }
+        assert!(rel(sol.flow_rate, q) < 1e-10, "{} vs {q}", sol.flow_rate);
+        for k in 0..ny * nx {
+            if !p[k].is_nan() {
+                assert!((sol.pressure[k] - p[k]).abs() < 1e-10 * pr.pressure_drop);
+            }
+        }
+    }
+}
+
+#[test]
+fn same_bits_on_one_and_two_threads() {
+    let (ny, nx) = (300, 260);
+    let gap = random_gap(11, ny * nx, 0.3);
+    let run = |t: usize| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(t)
+            .build()
+            .unwrap();
+        pool.install(|| solve(&problem(&gap, ny, nx, 0, true), &Options::default()).unwrap())
+    };
+    let (a, b) = (run(1), run(2));
+    assert_eq!(a.flow_rate.to_bits(), b.flow_rate.to_bits());
+    assert_eq!(a.iterations, b.iterations);
+    assert!(a
+        .pressure
+        .iter()
+        .zip(&b.pressure)
+        .all(|(x, y)| x.to_bits() == y.to_bits()));
+}
+
+#[test]
+fn same_bits_on_one_and_two_threads_multigrid() {
+    let (ny, nx) = (300, 260);
+    let gap = random_gap(11, ny * nx, 0.3);
+    let run = |t: usize| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(t)
+            .build()
+            .unwrap();
+        pool.install(|| {
+            solve(
+                &problem(&gap, ny, nx, 0, true),
+                &Options {
+                    solver: Solver::Multigrid,
+                    ..Options::default()
+                },
+            )
+            .unwrap()
+        })
+    };
+    let (a, b) = (run(1), run(2));
+    assert_eq!(a.flow_rate.to_bits(), b.flow_rate.to_bits());
+    assert_eq!(a.iterations, b.iterations);
+    assert!(a
+        .pressure
+        .iter()
+        .zip(&b.pressure)
+        .all(|(x, y)| x.to_bits() == y.to_bits()));
+}
+
+#[test]
+fn contact_mask_closes_cells_and_bad_input_is_refused() {
+    let (ny, nx) = (10, 10);
+    let gap = vec![1.0; ny * nx];
+    let mut contact = vec![false; ny * nx];
+    for j in 0..nx {
+        contact[4 * nx + j] = true;
+    }
+    let mut pr = problem(&gap, ny, nx, 0, false);
+    pr.contact = Some(&contact);
+    assert_eq!(solve(&pr, &Options::default()).unwrap().flow_rate, 0.0);
+    // The mask across the flow leaves the axis-1 flow untouched but for the closed row.
+    pr.axis = 1;
+    let s = solve(&pr, &Options::default()).unwrap();
+    let exact = 9.0 * pr.pressure_drop / (12.0 * pr.viscosity * 10.0);
+    assert!(rel(s.flow_rate, exact) < 1e-12);
+
+    let mut bad = gap.clone();
+    bad[5] = f64::NAN;
+    let e = solve(&problem(&bad, ny, nx, 0, false), &Options::default()).unwrap_err();
+    assert!(matches!(e, Error::InvalidArgument { name: "gap", .. }));
+    bad[5] = -1.0;
+    let e = solve(&problem(&bad, ny, nx, 0, false), &Options::default()).unwrap_err();
+    assert!(matches!(e, Error::InvalidArgument { name: "gap", .. }));
+    let mut pr = problem(&gap, ny, nx, 0, false);
+    pr.viscosity = 0.0;
+    assert!(matches!(
+        solve(&pr, &Options::default()).unwrap_err(),
+        Error::InvalidArgument {
+            name: "viscosity",
+            ..
+        }
+    ));
+    let small = Options {
+        memory_limit: Some(1000),
+        ..Options::default()
+    };
+    assert!(matches!(
+        solve(&problem(&gap, ny, nx, 0, false), &small).unwrap_err(),
+        Error::TooLarge { .. }
+    ));
+}
+
+#[test]
+fn multigrid_keeps_iterations_low() {
+    // Plain aggregation alone needs ~50 iterations on plates at 513² and grows with the
+    // number of levels; the K-cycle keeps it flat.
+    let (ny, nx) = (513, 513);
+    let mg = Options {
+        solver: Solver::Multigrid,
+        ..Options::default()
+    };
+    let gap = vec![1.0; ny * nx];
+    let sol = solve(&problem(&gap, ny, nx, 0, false), &mg).unwrap();
+    assert!(sol.iterations <= 30, "{}", sol.iterations);
+    let gap = random_gap(13, ny * nx, 0.0);
+    let sol = solve(&problem(&gap, ny, nx, 0, false), &mg).unwrap();
+    assert!(sol.iterations <= 80, "{}", sol.iterations);
+}
