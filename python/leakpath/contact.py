@@ -42,12 +42,15 @@ SOLVERS = ("lawson-hanson", "active-set", "polonsky-keer", "auto")
 DEFAULT_TOL = 1e-12
 
 #: ``solver="auto"`` uses the exact block active set on grids of at most this many points
-#: and Polonsky–Keer above. Measured from p = 0 at Δ = 0.3/0.6/1.0 h_s
-#: (``benchmarks/auto_policy_bench.py``, ``benchmarks/results/auto_policy.md``): on 17² the
-#: active set is faster at low contact and the two are within a few milliseconds; from 33²
-#: on Polonsky–Keer is as fast or faster at every approach, 20× at 129² and Δ = 0.6 h_s and
-#: 400× at Δ = h_s (the factor work grows like k³ in the contact points k, Polonsky–Keer
-#: like N log N per iteration).
+#: and Polonsky–Keer above. Measured from p = 0 at Δ = 0.3/0.6/1.0 h_s on an idle machine
+#: (``benchmarks/auto_policy_bench.py`` → ``benchmarks/results/auto_policy.md``): on 17² the
+#: active set is faster at every approach (0.2–0.4 ms); on 33²–65² it is faster at low
+#: contact by at most 3 ms and 2–2.5× slower at half contact; from 129² on Polonsky–Keer is
+#: faster at every approach, 45× at Δ = 0.6 h_s and hundreds of times at Δ = h_s (the
+#: factor work grows like k³ in the contact points k, Polonsky–Keer like N log N per
+#: iteration). A rule by grid size keeps one solver per grid, which warm-started sweeps need
+#: (pressure fields versus contact sets); a per-solve contact-count model would save at most
+#: a few milliseconds per solve on the small grids.
 AUTO_ACTIVE_SET_MAX_POINTS = 32 * 32
 
 
