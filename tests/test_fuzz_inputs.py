@@ -419,6 +419,8 @@ def _api_cases(small: Surface) -> list[tuple[str, str, Any, Any]]:
         "percolation_threshold.axis": lambda v: percolation_threshold(small, axis=v),
         "nayak_moments.dx": lambda v: nayak_moments(h, v),
         "kernel_table.shape": lambda v: kernel_table(v, 1.0),
+        "kernel_table.dx": lambda v: kernel_table((3, 3), v),
+        "kernel_table.e_star": lambda v: kernel_table((3, 3), 1.0, v),
         "load.dx": lambda v: load("/nonexistent-never-read.npy", dx=v),
     }
     ints = {"rmd.m", "rmd.seed", "solve.max_iter", "sweep.levels", "percolation.threads",

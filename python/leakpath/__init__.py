@@ -53,4 +53,6 @@ def kernel_table(shape: tuple[int, int], dx: float, e_star: float = 1.0):
             "shape", f"a kernel table of {ny} × {nx} values", 8 * ny * nx, limit,
             "ask for a smaller table",
         )
-    return _kernel_table(ny, nx, float(dx), float(e_star))
+    dx = _validate.spacing("dx", dx)
+    e_star = _validate.positive("e_star", e_star)
+    return _kernel_table(ny, nx, dx, e_star)
