@@ -126,7 +126,7 @@ KKT_ACCEPT = 1e-8
 #: Axes accepted by ``axis`` (DESIGN §4).
 AXES: tuple[Any, ...] = (0, 1, "either", "both")
 
-_CHECKPOINT_FORMAT = 1
+_CHECKPOINT_FORMAT = 2  # 2: records bound to their run, checksummed, with pressure fields
 
 # (name, type) of every column, in CSV order. Types: "f" float, "i" int, "s" str.
 _COLUMN_SPEC: tuple[tuple[str, str], ...] = (
