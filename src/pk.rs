@@ -3,7 +3,7 @@
 //!
 //! # Problem
 //!
-//! With heights `h` (row-major `ny × nx`), `u = C p` and the conventions of DESIGN §1, find
+//! With heights `h` (row-major `ny × nx`), `u = C p` and the conventions of `docs/conventions.md`, find
 //!
 //! ```text
 //! p ≥ 0,   g = max h − Δ − h + C p ≥ 0,   p·g = 0,
@@ -24,7 +24,7 @@
 //!
 //!   so that `g = max h − Δ − h + u` has zero mean on `I_c` (the paper's `g ← g − ḡ`).
 //!   Positive `Δ` means the flat has moved down into the surface from first touch. With
-//!   `boundary = "periodic"` it is measured in that convention (u has zero mean, DESIGN §1),
+//!   `boundary = "periodic"` it is measured in that convention (u has zero mean, `docs/conventions.md`),
 //!   and it is reported as computed, not clamped.
 //!
 //! # Iteration (the paper's steps, in this sign convention)
@@ -1631,7 +1631,7 @@ mod tests {
                 let e = max_rel(&s.pressure, &exact);
                 assert!(e < 1e-8, "{ny}x{nx} Δ*={frac}: rel err {e}");
                 assert!(s.kkt <= 1e-12);
-                // Reported gap is the DESIGN formula with a fresh u = C p.
+                // Reported gap is the documented formula with a fresh u = C p.
                 let u = dense_apply(&ker, &s.pressure);
                 for i in 0..n {
                     let g = hmax - delta - h[i] + u[i];

@@ -36,7 +36,7 @@ def result(surface) -> SweepResult:
 
 
 def fd_moments(s: np.ndarray, dx: float) -> tuple[float, float, float]:
-    """m0, m2, m4 with the finite differences of DESIGN §4, written out independently."""
+    """m0, m2, m4 with the finite differences of docs/conventions.md, written out independently."""
     m0 = np.mean((s - s.mean()) ** 2)
     m2 = 0.5 * (np.mean(np.diff(s, axis=1) ** 2) + np.mean(np.diff(s, axis=0) ** 2)) / dx**2
     sxx = s[:, 2:] - 2 * s[:, 1:-1] + s[:, :-2]

@@ -1,4 +1,4 @@
-"""Nayak's spectral moments of a sampled surface (DESIGN §4).
+"""Nayak's spectral moments of a sampled surface (``docs/conventions.md``).
 
 Conventions
 -----------
@@ -196,7 +196,8 @@ def nayak_moments(
     dx : float, optional
         Grid spacing [length]; required for a plain array.
     method : {"fd", "spectral"}
-        ``"fd"`` (default): non-periodic forward/central finite differences (DESIGN §4).
+        ``"fd"`` (default): non-periodic forward/central finite differences
+        (``docs/conventions.md``).
         ``"spectral"``: from the periodogram, treating the sample as one period of a periodic
         surface; wavevectors ``q = 2π·fftfreq(n, dx)`` in rad/length.
 

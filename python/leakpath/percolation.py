@@ -1,6 +1,6 @@
 """Percolation of the free region between the surfaces: its clusters and their classes.
 
-Definitions (see DESIGN §4):
+Definitions (``docs/conventions.md``):
 
 * A cell is *free* when it is not in contact (``p = 0``). Two free cells belong to the same
   *cluster* when a chain of neighbouring free cells joins them: edge neighbours with

@@ -1,4 +1,4 @@
-"""Rough surfaces: the :class:`Surface` container, generators and file I/O (DESIGN §2).
+"""Rough surfaces: the :class:`Surface` container, generators and file I/O (``docs/surfaces.md``).
 
 Conventions
 -----------

@@ -1,4 +1,4 @@
-"""Sweeps over the imposed approach: the paper's experiment as a table (DESIGN §4).
+"""Sweeps over the imposed approach: the paper's experiment as a table (``docs/conventions.md``).
 
 A sweep presses one rough surface against the rigid flat at a sequence of increasing imposed
 approaches ``Δ_0 < Δ_1 < …`` and records, per level, the contact, the free volume, its
@@ -123,7 +123,7 @@ PathLike = str | os.PathLike[str]
 #: reach it either, the sweep raises ``RuntimeError``.
 KKT_ACCEPT = 1e-8
 
-#: Axes accepted by ``axis`` (DESIGN §4).
+#: Axes accepted by ``axis`` (``docs/conventions.md``).
 AXES: tuple[Any, ...] = (0, 1, "either", "both")
 
 _CHECKPOINT_FORMAT = 2  # 2: records bound to their run, checksummed, with pressure fields
@@ -955,7 +955,7 @@ def sweep(
     E, nu : float
         Young's modulus and Poisson's ratio, ``E* = E/(1 − ν²)`` (pressures in E's unit).
     boundary : "free" or "periodic"
-        Elastic boundary condition (DESIGN §1).
+        Elastic boundary condition (``docs/conventions.md``).
     keep_fields : bool
         Keep pressure, gap and cluster labels of every level (:meth:`SweepResult.save_fields`).
     progress : bool
