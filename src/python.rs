@@ -204,6 +204,18 @@ fn default_memory_limit(py: Python<'_>) -> PyResult<u64> {
         .extract()
 }
 
+/// Row-major values of a 2-D array, copied only when it is not C-contiguous (`as_slice` alone
+/// also accepts Fortran-contiguous arrays, whose memory order is column-major).
+fn row_major<'a, T: numpy::Element + Copy>(
+    a: &'a numpy::PyReadonlyArray2<'_, T>,
+) -> std::borrow::Cow<'a, [T]> {
+    use numpy::PyUntypedArrayMethods;
+    match a.as_slice() {
+        Ok(s) if a.is_c_contiguous() => std::borrow::Cow::Borrowed(s),
+        _ => std::borrow::Cow::Owned(a.as_array().iter().copied().collect()),
+    }
+}
+
 fn check_positive(name: &'static str, v: f64) -> PyResult<()> {
     if !(v.is_finite() && v > 0.0) {
         return Err(to_py(Error::invalid(
@@ -255,7 +267,6 @@ fn kernel_table<'py>(
 // Connected components of the free region and their percolation classes (core: clusters.rs).
 // Kept in a private module so that its imports cannot clash with the rest of this file.
 mod clusters_py {
-    use std::borrow::Cow;
     use std::sync::{Arc, Mutex};
 
     use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray2, PyUntypedArrayMethods};
@@ -263,18 +274,9 @@ mod clusters_py {
     use pyo3::prelude::*;
     use pyo3::types::PyDict;
 
-    use super::to_py;
+    use super::{row_major, to_py};
     use crate::clusters::{self, Connectivity, ContactMask, Flow, FreeMask, Periodic, PositiveGap};
     use crate::error::Error;
-
-    /// Row-major cells of a 2-D array, copied only when the array is not C-contiguous.
-    /// (`as_slice` also accepts Fortran order, whose memory order is column-major.)
-    fn row_major<'a, T: numpy::Element + Copy>(a: &'a PyReadonlyArray2<'_, T>) -> Cow<'a, [T]> {
-        match a.as_slice() {
-            Ok(s) if a.is_c_contiguous() => Cow::Borrowed(s),
-            _ => Cow::Owned(a.as_array().iter().copied().collect()),
-        }
-    }
 
     /// Most threads a call may ask for: four per available core. More only adds threads
     /// that wait for a core; a count like 2⁴⁰ would try to start them all.
@@ -780,14 +782,13 @@ mod contact_py {
 // ---- polonsky-keer ----
 // Polonsky–Keer constrained conjugate gradients on the FFT operator (core: pk.rs).
 mod pk_py {
-    use std::borrow::Cow;
     use std::time::Instant;
 
     use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray2, PyUntypedArrayMethods};
     use pyo3::prelude::*;
     use pyo3::types::PyDict;
 
-    use super::to_py;
+    use super::{row_major, to_py};
     use crate::alloc;
     use crate::error::Error;
     use crate::operator::Boundary;
@@ -795,15 +796,6 @@ mod pk_py {
 
     fn invalid(name: &'static str, msg: String) -> PyErr {
         to_py(Error::invalid(name, msg))
-    }
-
-    /// Row-major values of a 2-D array, copied only when it is not C-contiguous. (`as_slice`
-    /// alone also accepts Fortran-contiguous arrays, whose memory order is column-major.)
-    fn row_major<'a>(a: &'a PyReadonlyArray2<'_, f64>) -> Cow<'a, [f64]> {
-        match a.as_slice() {
-            Ok(s) if a.is_c_contiguous() => Cow::Borrowed(s),
-            _ => Cow::Owned(a.as_array().iter().copied().collect()),
-        }
     }
 
     /// Frictionless normal contact of an elastic rough surface against a rigid flat by
@@ -954,22 +946,14 @@ mod pk_py {
 // ---- reynolds flow ----
 // Leak rate: steady Reynolds flow through the gap (core: flow/).
 mod flow_py {
-    use std::borrow::Cow;
 
     use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray2, PyUntypedArrayMethods};
     use pyo3::prelude::*;
     use pyo3::types::PyDict;
 
-    use super::to_py;
+    use super::{row_major, to_py};
     use crate::error::Error;
     use crate::flow::{self, Options, Problem};
-
-    fn row_major<'a, T: numpy::Element + Copy>(a: &'a PyReadonlyArray2<'_, T>) -> Cow<'a, [T]> {
-        match a.as_slice() {
-            Ok(s) if a.is_c_contiguous() => Cow::Borrowed(s),
-            _ => Cow::Owned(a.as_array().iter().copied().collect()),
-        }
-    }
 
     /// Steady Reynolds flow through the gap; flow along `axis`, inlet at `pressure_drop`,
     /// outlet at 0. Returns a dict (see `_core.pyi`).

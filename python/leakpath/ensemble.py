@@ -751,14 +751,19 @@ def _init_worker(threads: int, alive: Any = None) -> None:
         ).start()
 
 
-def _detach_stdio() -> None:
-    """Point file descriptors 1 and 2 of this process at ``/dev/null``."""
+def _flush_std_streams() -> None:
+    """Flush Python's stdout and stderr before their file descriptors are redirected."""
     for stream in (sys.stdout, sys.stderr):
         try:
             if stream is not None:
                 stream.flush()
         except (OSError, ValueError):
             pass
+
+
+def _detach_stdio() -> None:
+    """Point file descriptors 1 and 2 of this process at ``/dev/null``."""
+    _flush_std_streams()
     devnull = os.open(os.devnull, os.O_WRONLY)
     try:
         for fd in (1, 2):
@@ -785,12 +790,7 @@ class _StartingChildren:
 
     def __enter__(self) -> _StartingChildren:
         self.saved: list[tuple[int, int]] = []
-        for stream in (sys.stdout, sys.stderr):
-            try:
-                if stream is not None:
-                    stream.flush()
-            except (OSError, ValueError):
-                pass
+        _flush_std_streams()
         devnull = os.open(os.devnull, os.O_WRONLY)
         try:
             for fd in (1, 2):
