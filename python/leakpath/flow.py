@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from . import _core
+from ._memory import memory_limit as default_memory_limit
 from .errors import InvalidArgumentError
 
 __all__ = ["DEFAULT_TOL", "Flow", "flow"]
@@ -157,8 +158,6 @@ def flow(
         NotConvergedError: ``max_iter`` reached.
         ProblemTooLargeError: the solve would need more than ``memory_limit`` bytes.
     """
-    from .contact import default_memory_limit
-
     if isinstance(axis, (bool, np.bool_)) or not isinstance(axis, numbers.Integral):
         raise InvalidArgumentError(f"axis: must be 0 or 1, got {axis!r}", argument="axis")
     if int(axis) not in (0, 1):

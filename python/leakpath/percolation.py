@@ -21,7 +21,10 @@ Definitions (``docs/conventions.md``):
   each a compensated sum over clusters, so the identity holds to a few ulps. ``V`` sums the
   free cells only: the contact state's ``dx² Σ g`` less the gaps left on contact cells
   (zero for an exact solve).
-* Given a plain gap array and no contact mask, the cells with ``g > 0`` are free.
+* Given a plain gap array and no contact mask, the cells with ``g > 0`` are free. With a
+  contact mask (a contact state's ``p > 0``), a cell is free when it is not in contact *and*
+  ``g > 0``: the one definition of an *open* cell that :func:`leakpath.flow` uses too, so
+  the flow leaks exactly when the free region percolates.
 
 The labelling runs in Rust on all cores (``threads`` to limit it); labels are numbered
 ``1..K`` in raster order of each cluster's first cell, identical for any thread count.
@@ -215,6 +218,10 @@ def percolation(
             raise InvalidArgumentError(
                 f"contact: must have the gap's shape {gap.shape}, got {contact.shape}"
             )
+        # One definition of an open cell for the percolation and the flow
+        # (docs/conventions.md): not in contact and g > 0. A free cell whose gap an iterative
+        # solve left at or below 0 within its tolerance conducts nothing, so it is closed.
+        contact = contact | ~(gap > 0)
 
     dx_f = _validate.spacing("dx", dx)
 
