@@ -14,8 +14,9 @@ leaking level below, to 1e-4 of the height range — the same bisection as
 ``leakpath.percolation_threshold(surface, boundary="periodic", solver="polonsky-keer")``
 (they must be equal: the flow has unknowns exactly on the spanning clusters of the same
 4-connectivity) and with the value ≈ 0.42 of Dapp, Lücke, Persson and Müser, PRL 108,
-244301 (2012), also found by Wang and Müser (2021). Every solved level also gives a point of the leak rate (``η = Δp = 1``, flow
-solved to a relative residual of 1e-8) against the contact fraction.
+244301 (2012), also found by Wang and Müser (2021). Every solved level also gives a point
+of the leak rate (``η = Δp = 1``, flow solved to a relative residual of 1e-8) against the
+contact fraction.
 """
 
 from __future__ import annotations
@@ -100,7 +101,8 @@ def main() -> None:
         f"**Contact fraction at which the leak stops (axis 0): mean {mean:.4f}, std {std:.4f}, "
         f"standard error {std / len(ok) ** 0.5:.4f}** over {len(ok)} surfaces; Dapp et al. "
         f"(PRL 2012) and Wang & Müser (2021): ≈ {DAPP_2012}. Open cell (flow and "
-        f"percolation alike): p = 0 and g > 0 (docs/conventions.md). Equal to `leakpath.percolation_threshold` (approach and "
+        f"percolation alike): p = 0 and g > 0 (docs/conventions.md). Equal to "
+        f"`leakpath.percolation_threshold` (approach and "
         f"contact fraction, bit for bit) on {sum(r[5] for r in rows)} of {len(rows)} surfaces.",
         "",
         "| seed | Δ_c (flow) | a_c (flow) | Δ_c (percolation_threshold) | a_c (percolation) | "

@@ -133,7 +133,8 @@ def test_percolation_columns_against_an_independent_labelling(result):
 
     for k in (0, LEVELS // 2, LEVELS):
         p, g = result.fields["pressure"][k], result.fields["gap"][k]
-        labels, n = ndimage.label(p <= 0)  # 4-connectivity
+        # Open cells (docs/conventions.md): not in contact and g > 0; 4-connectivity.
+        labels, n = ndimage.label((p <= 0) & (g > 0))
         dx2 = result.surface.dx**2
         for axis, key in ((0, "axis0"), (1, "axis1")):
             first = np.take(labels, 0, axis=axis)
@@ -143,7 +144,7 @@ def test_percolation_columns_against_an_independent_labelling(result):
             assert result.rows[k][f"n_spanning_{key}"] == len(span)
             assert result.rows[k][f"V_pg_{key}"] == pytest.approx(v, rel=1e-9, abs=1e-300)
         classes = result.class_map(k)
-        assert np.array_equal(classes == 0, p > 0)
+        assert np.array_equal(classes == 0, (p > 0) | (g <= 0))  # closed cells
         assert np.array_equal(result.contact_mask(k), p > 0)
 
 

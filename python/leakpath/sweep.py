@@ -94,7 +94,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import numpy.typing as npt
 
-from . import __version__, _validate
+from . import __version__, _validate, leakage  # leakage: leak-rate columns Q, K, K_star
 from .contact import AUTO_ACTIVE_SET_MAX_POINTS, SOLVERS, ContactProblem, ContactState
 from .errors import InvalidArgumentError, NotConvergedError
 from .moments import nayak_moments
@@ -126,7 +126,7 @@ KKT_ACCEPT = 1e-8
 #: Axes accepted by ``axis`` (``docs/conventions.md``).
 AXES: tuple[Any, ...] = (0, 1, "either", "both")
 
-_CHECKPOINT_FORMAT = 2  # 2: records bound to their run, checksummed, with pressure fields
+_CHECKPOINT_FORMAT = 3  # 2: bound to their run, checksummed, pressure fields; 3: Q and K
 
 # (name, type) of every column, in CSV order. Types: "f" float, "i" int, "s" str.
 _COLUMN_SPEC: tuple[tuple[str, str], ...] = (
@@ -165,7 +165,7 @@ _COLUMN_SPEC: tuple[tuple[str, str], ...] = (
     ("iterations", "i"),
     ("kkt_restarts", "i"),
     ("kkt", "f"),
-)
+) + leakage.FLOW_COLUMNS  # leak-rate columns (leakpath.leakage)
 
 #: Every column of :attr:`SweepResult.rows`, in CSV order.
 COLUMNS: tuple[str, ...] = tuple(name for name, _ in _COLUMN_SPEC)
@@ -182,6 +182,7 @@ _STAR_COLUMNS = (
     "m2_star",
     "m4_star",
     "alpha_star",
+    "K_star",  # leakpath.leakage
 )
 #: Columns a level computes itself (the dimensionless ones follow from the reference).
 _LEVEL_COLUMNS = tuple(c for c in COLUMNS if c not in _STAR_COLUMNS)
@@ -205,6 +206,7 @@ def _units(length: str, pressure: str) -> dict[str, str]:
     for c in COLUMNS:
         if c.startswith(("V_pg", "V_dead", "V_trapped")) and not c.endswith("_star"):
             units[c] = f"{L}^3"
+    units.update({c: u.format(L=L) for c, u in leakage.FLOW_UNITS.items()})  # leakage
     return units
 
 
@@ -518,6 +520,7 @@ _DEFINITIONS = {
     "free_volume_star": "V/(A0*sigma), sigma = sqrt(m0) of the undeformed surface",
     "mean_gap_star": "mean_gap/mean_gap(Delta=0)",
     "V_pg_star": "V_pg/V_pg(Delta=0) for the chosen axis",
+    **leakage.FLOW_DESCRIPTIONS,  # leakpath.leakage
     "m_star": "m_n/m_n(undeformed), alpha_star likewise",
     "gap": "g = max h - Delta - h + u",
     "moments": "finite differences on s = h - u (leakpath.moments.nayak_moments)",
@@ -677,6 +680,8 @@ def _analyse(
     keep_fields: bool,
     t_start: float,
     keep_pressure: bool = False,
+    flow_axis: int = 0,
+    flow_on: bool = False,
 ) -> _Level:
     """Row, masks and fields of a solved level (``t_start``: when its solve began)."""
     p0 = state.percolation(axis=0, connectivity=connectivity)
@@ -706,6 +711,7 @@ def _analyse(
         "kkt_restarts": int(restarts),
         "kkt": float(state.kkt),
     }
+    row.update(leakage.flow_columns(state, flow_axis, flow_on))  # Q, K (leakpath.leakage)
     classes = np.asarray(pa.class_map(), dtype=np.int8)
     fields = None
     if keep_fields:
@@ -774,6 +780,12 @@ class _Checkpoint:
                     f"checkpoint_dir: cannot read {str(path)!r} ({exc}); delete it to restart",
                     argument="checkpoint_dir",
                 ) from None
+            if isinstance(found, dict) and found.get("format") != wanted["format"]:
+                raise CheckpointMismatch(
+                    self.dir,
+                    f"checkpoint format {found.get('format')!r}, this leakpath reads "
+                    f"{wanted['format']} (format 3 adds the leak-rate columns Q, K)",
+                )
             for key in _differences(found, wanted):
                 raise CheckpointMismatch(self.dir, key)
         else:
@@ -829,7 +841,8 @@ class _Checkpoint:
             raise _BadCheckpoint(f"malformed ({exc.__class__.__name__}: {exc})") from None
         for c in _LEVEL_COLUMNS:
             v = row[c]
-            if _TYPES[c] == "f" and c != "kkt" and not math.isfinite(v):
+            nan_ok = ("kkt",) + leakage.FLOW_LEVEL_COLUMNS  # NaN: flow switched off
+            if _TYPES[c] == "f" and c not in nan_ok and not math.isfinite(v):
                 raise _BadCheckpoint(f"{c} is not finite")
             if _TYPES[c] == "i" and v < 0:
                 raise _BadCheckpoint(f"{c} is negative")
@@ -903,6 +916,7 @@ def _finish_row(row: dict[str, Any], ref: Mapping[str, float], area: float) -> d
     out["V_pg_star"] = _ratio(row["V_pg"], ref["V_pg"])
     for name in ("m0", "m2", "m4", "alpha"):
         out[f"{name}_star"] = _ratio(row[name], ref[name])
+    out["K_star"] = leakage.flow_star(row, ref["K"])  # leakpath.leakage
     return {c: out[c] for c in COLUMNS}
 
 
@@ -922,6 +936,8 @@ def sweep(
     keep_fields: bool = False,
     progress: bool = False,
     checkpoint_dir: PathLike | None = None,
+    flow: bool | None = None,
+    flow_axis: int | None = None,
 ) -> SweepResult:
     """Solve the contact of ``surface`` at increasing approaches and tabulate each level.
 
@@ -962,6 +978,11 @@ def sweep(
         Show a tqdm progress bar (one step per level) on stderr.
     checkpoint_dir : path, optional
         Write each finished level there and reuse the levels found there (module docstring).
+    flow : bool, optional
+        Leak-rate columns ``Q``, ``K``, ``K_star`` (:mod:`leakpath.leakage`): ``True``,
+        ``False`` (NaN columns), or ``None`` (default: on up to 513² points).
+    flow_axis : 0 or 1, optional
+        Direction of the leak (default: ``axis`` when it is 0 or 1, else 0).
 
     Returns
     -------
@@ -993,6 +1014,8 @@ def sweep(
     n_levels = _check_levels(levels, surface.shape, keep_fields)
     axis = _check_axis(axis)
     connectivity = _check_connectivity(connectivity)
+    flow_on = leakage.flow_enabled(flow, surface.shape)  # leakpath.leakage
+    flow_axis = leakage.flow_axis_for(flow_axis, axis)
     problem = ContactProblem(surface, E=E, nu=nu, boundary=boundary)  # type: ignore[arg-type]
     if approaches is not None and mean_pressures is not None:
         raise InvalidArgumentError(
@@ -1033,6 +1056,8 @@ def sweep(
         "boundary": boundary,
         "kkt_accept": KKT_ACCEPT,
         "keep_fields": bool(keep_fields),
+        "flow": flow_on,  # leakpath.leakage
+        "flow_axis": flow_axis,
     }
 
     # Undeformed reference (Δ = 0: p = 0, u = 0, the whole interface is free).
@@ -1050,6 +1075,7 @@ def sweep(
         "m2": ref_mom.m2,
         "m4": ref_mom.m4,
         "alpha": ref_mom.alpha,
+        "K": leakage.reference_permeability(ref_state, flow_axis, flow_on),  # leakage
     }
 
     checkpoint = None
@@ -1097,6 +1123,8 @@ def sweep(
                     keep_fields=keep_fields,
                     t_start=t0,
                     keep_pressure=keep_pressure,
+                    flow_axis=flow_axis,  # leakpath.leakage
+                    flow_on=flow_on,
                 )
                 if checkpoint is not None:
                     checkpoint.save(k, level, shape)

@@ -1,0 +1,174 @@
+"""Leak-rate columns of sweeps (leakpath.leakage): Q, K, K* against independent oracles.
+
+Oracles: the parallel-channel permeability of a gap that varies only across the flow,
+written out here with numpy; leakpath.flow called on each level's own fields; the
+percolation threshold found by the same bisection on a plain breadth-first search.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections import deque
+
+import numpy as np
+import pytest
+
+import leakpath
+from leakpath import leakage
+from leakpath.contact import ContactProblem
+from leakpath.errors import InvalidArgumentError
+from leakpath.surfaces import Surface
+from leakpath.sweep import COLUMNS, CheckpointMismatch, sweep
+
+
+def _grooves(ny=24, nx=20, seed=5):
+    """Heights that vary only across axis 0 (along axis 1): channels along axis 0."""
+    rng = np.random.default_rng(seed)
+    row = rng.normal(size=nx)
+    return Surface(np.tile(row, (ny, 1)), dx=0.5)
+
+
+def test_columns_present_and_undeformed_permeability_is_the_parallel_channels():
+    s = _grooves()
+    r = sweep(s, levels=4, solver="active-set", boundary="periodic", flow_axis=0)
+    for c in ("Q", "K", "K_star"):
+        assert c in COLUMNS
+    g = s.heights.max() - s.heights  # the undeformed gap
+    # Each column of cells along the flow is a series of equal resistances 12η/g³; the
+    # columns are in parallel, so K = Q η L/(W Δp) = mean over the columns of g³/12.
+    k_channels = float(np.mean(g[0] ** 3 / 12.0))
+    ny, nx = s.shape
+    assert r.rows[0]["K"] == pytest.approx(k_channels, rel=1e-12)
+    assert r.rows[0]["Q"] == pytest.approx(k_channels * nx / ny, rel=1e-12)
+    assert r.reference["K"] == pytest.approx(k_channels, rel=1e-12)
+    # K* divides every level by that same undeformed K (not by its own row 0 alone).
+    for row in r.rows:
+        assert row["K_star"] == pytest.approx(row["K"] / k_channels, rel=1e-14) or (
+            row["K"] == 0 and row["K_star"] == 0
+        )
+    # Pressing the grooves closes them: the leak rate falls to nothing at full contact.
+    ks = [row["K"] for row in r.rows]
+    assert all(a >= b for a, b in zip(ks, ks[1:], strict=False))
+    assert ks[-1] < 1e-12 * ks[0]
+
+
+def test_columns_equal_flow_on_each_levels_own_fields():
+    s = leakpath.spectral(48, 0.8, seed=2, rms_height=1.0)
+    r = sweep(s, levels=8, boundary="periodic", keep_fields=True, flow_axis=1, axis=0)
+    assert r.parameters["flow"] is True and r.parameters["flow_axis"] == 1
+    for k, row in enumerate(r.rows):
+        p, g = r.fields["pressure"][k], r.fields["gap"][k]
+        f = leakpath.flow(
+            np.maximum(g, 0.0), dx=s.dx, contact=p > 0, axis=1, periodic=True
+        )
+        assert row["Q"] == f.flow_rate
+        assert row["K"] == f.permeability
+        # Q > 0 exactly when the open region spans axis 1 (same 4-connectivity).
+        spans = leakpath.percolation(g, dx=s.dx, contact=p > 0, axis=1, periodic=True)
+        assert (row["Q"] > 0) == spans.percolates
+    ref = leakpath.flow(np.max(s.heights) - s.heights, dx=s.dx, axis=1, periodic=True)
+    assert r.reference["K"] == ref.permeability
+
+
+def test_flow_switch_and_axis_validation():
+    s = leakpath.spectral(24, 0.8, seed=1, rms_height=1.0)
+    r = sweep(s, levels=3, flow=False)
+    assert all(math.isnan(row[c]) for row in r.rows for c in ("Q", "K", "K_star"))
+    assert "Q,K,K_star" in r.csv_text().splitlines()[0]
+    assert leakage.flow_enabled(None, (129, 129))
+    assert not leakage.flow_enabled(None, (1025, 1025))
+    assert leakage.flow_enabled(True, (4097, 4097))
+    with pytest.raises(InvalidArgumentError, match="flow:"):
+        sweep(s, levels=3, flow="yes")
+    with pytest.raises(InvalidArgumentError, match="flow_axis:"):
+        sweep(s, levels=3, flow_axis="both")
+    # The default flow axis follows a numeric percolation axis.
+    assert sweep(s, levels=2, axis=1).parameters["flow_axis"] == 1
+    assert sweep(s, levels=2, axis="either").parameters["flow_axis"] == 0
+
+
+def test_resume_carries_the_columns_byte_identical(tmp_path):
+    s = leakpath.spectral(40, 0.8, seed=4, rms_height=1.0)
+    full = sweep(s, levels=6, boundary="periodic", checkpoint_dir=tmp_path / "a")
+    assert any(row["Q"] > 0 for row in full.rows)
+    for k in (3, 4, 6):
+        (tmp_path / "a" / f"level_{k:04d}.json").unlink()
+    resumed = sweep(s, levels=6, boundary="periodic", checkpoint_dir=tmp_path / "a")
+    assert resumed.resumed == [0, 1, 2, 5]
+    assert resumed.csv_text() == full.csv_text()
+    rec = json.loads((tmp_path / "a" / "level_0002.json").read_text())
+    assert rec["row"]["Q"] == full.rows[2]["Q"]
+    # A checkpoint of the previous format (no Q, K) is refused, naming the format.
+    man = tmp_path / "a" / "manifest.json"
+    data = json.loads(man.read_text())
+    data["format"] = 2
+    man.write_text(json.dumps(data))
+    with pytest.raises(CheckpointMismatch, match="checkpoint format 2"):
+        sweep(s, levels=6, boundary="periodic", checkpoint_dir=tmp_path / "a")
+
+
+def test_a_free_cell_with_zero_gap_is_closed_for_both():
+    """A corridor of open cells whose only link is a free cell with g = 0."""
+    gap = np.zeros((5, 5))
+    contact = np.ones((5, 5), dtype=bool)
+    contact[:, 2] = False
+    gap[:, 2] = 1.0
+    gap[2, 2] = 0.0  # free (p = 0) but closed
+    perc = leakpath.percolation(gap, dx=1.0, contact=contact, axis=0)
+    f = leakpath.flow(gap, dx=1.0, contact=contact, axis=0)
+    assert not perc.percolates and f.flow_rate == 0.0
+    gap[2, 2] = 1e-3
+    perc = leakpath.percolation(gap, dx=1.0, contact=contact, axis=0)
+    f = leakpath.flow(gap, dx=1.0, contact=contact, axis=0)
+    assert perc.percolates and f.flow_rate > 0.0
+
+
+def _bfs_spans(open_: np.ndarray, periodic: bool) -> bool:
+    """Plain breadth-first search: does an open 4-connected path join row 0 to the last row?"""
+    ny, nx = open_.shape
+    seen = np.zeros_like(open_)
+    todo = deque((0, j) for j in range(nx) if open_[0, j])
+    for c in todo:
+        seen[c] = True
+    while todo:
+        i, j = todo.popleft()
+        if i == ny - 1:
+            return True
+        for di, dj in ((1, 0), (-1, 0), (0, 1), (0, -1)):
+            a, b = i + di, j + dj
+            if periodic:
+                b %= nx
+            if 0 <= a < ny and 0 <= b < nx and open_[a, b] and not seen[a, b]:
+                seen[a, b] = True
+                todo.append((a, b))
+    return False
+
+
+@pytest.mark.parametrize("seed", [0, 3, 7, 11])
+def test_leak_stops_at_the_percolation_threshold(seed):
+    """Bisection on Q > 0 with percolation_threshold's bracket and warm starts gives the same
+    threshold; every state's Q > 0 agrees with a plain BFS on its open cells."""
+    s = leakpath.spectral(48, 0.8, seed=seed, rms_height=1.0)
+    pt = leakpath.percolation_threshold(s, boundary="periodic", solver="polonsky-keer")
+    prob = ContactProblem(s, boundary="periodic")
+    tol = 1e-4 * s.height_range
+
+    def leaks(st):
+        q = st.flow().flow_rate
+        open_ = (st.pressure <= 0) & (np.maximum(st.gap, 0.0) > 0)
+        assert (q > 0) == _bfs_spans(open_, periodic=True)
+        return q > 0
+
+    lo_state = prob.solve(0.0, solver="polonsky-keer")
+    assert leaks(lo_state)
+    lo, hi, hi_state = 0.0, prob.max_approach, None
+    while hi - lo > tol:
+        mid = 0.5 * (lo + hi)
+        st = prob.solve(mid, solver="polonsky-keer", warm_start=lo_state if lo > 0 else None)
+        if leaks(st):
+            lo, lo_state = mid, st
+        else:
+            hi, hi_state = mid, st
+    assert hi == pt.approach
+    assert hi_state is not None and hi_state.contact_fraction == pt.contact_fraction
