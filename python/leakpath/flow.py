@@ -16,6 +16,11 @@ Conventions (docs/flow.md):
 * Parallel plates of gap ``g``: ``Q = W g³ Δp / (12 η L)``, ``W`` the width across the flow,
   ``L`` the length along it.
 
+Ideal gas (``gas=True``, isothermal, docs/flow.md): the mass flux ``ρ q`` with
+``ρ = p/(R_s T)`` is ``−g³/(24 η R_s T) ∇(p²)``, so ``φ = p²`` obeys the same equation and the
+same conductance ``C`` gives ``ṁ = C (p_in² − p_out²)/(2 R_s T)``; the pressure is
+``p = √φ``.
+
 Derived quantities: conductance ``Q/Δp``; permeability ``K = Q η L / (W Δp)`` (length²·length:
 the gap permeability with η taken out, ``g³/12`` for plates, so ``Q/W = (K/η) Δp/L``);
 hydraulic aperture ``(12 K)^{1/3}`` (``g`` for plates).
@@ -64,6 +69,14 @@ class Flow:
         n_unknowns: cells carrying an unknown pressure (those of the spanning clusters).
         axis, viscosity, pressure_drop, periodic, dx: the inputs.
         seconds: wall time of the solve.
+        gas: True for the isothermal ideal gas (``gas=True``); then ``mass_flow_rate`` is
+            ``ṁ = C (p_in² − p_out²)/(2 R_s T)`` (mass/time), ``flow_rate`` and
+            ``inlet_flow_rate`` are volume flow rates at the outlet density
+            (``ṁ R_s T/p_out``; inf for ``p_out = 0``), ``pressure`` is the absolute pressure
+            ``√φ``, the fluxes are mass fluxes, and ``pressure_drop`` is ``p_in − p_out``.
+            NaN for a liquid.
+        inlet_pressure, outlet_pressure, gas_constant, temperature: the gas inputs (NaN for
+            a liquid).
     """
 
     flow_rate: float
@@ -84,6 +97,12 @@ class Flow:
     periodic: bool
     dx: float
     seconds: float
+    gas: bool = False
+    mass_flow_rate: float = float("nan")
+    inlet_pressure: float = float("nan")
+    outlet_pressure: float = float("nan")
+    gas_constant: float = float("nan")
+    temperature: float = float("nan")
 
     @property
     def percolates(self) -> bool:
@@ -121,7 +140,7 @@ def flow(
     *,
     axis: int = 0,
     viscosity: float = 1.0,
-    pressure_drop: float = 1.0,
+    pressure_drop: float | None = None,
     dx: float | None = None,
     periodic: bool | None = None,
     contact: np.ndarray | None = None,
@@ -129,6 +148,11 @@ def flow(
     max_iter: int | None = None,
     memory_limit: int | None = None,
     solver: str = "auto",
+    gas: bool = False,
+    inlet_pressure: float | None = None,
+    outlet_pressure: float | None = None,
+    gas_constant: float | None = None,
+    temperature: float | None = None,
 ) -> Flow:
     """Steady Reynolds flow through the gap (module docstring; docs/flow.md).
 
@@ -137,7 +161,8 @@ def flow(
             (``p > 0``), ``dx`` and ``boundary`` are used) or a 2-D array of gaps (length).
         axis: flow direction, 0 (default) or 1.
         viscosity: dynamic viscosity ``η > 0``.
-        pressure_drop: ``Δp = p_inlet − p_outlet`` (finite; negative reverses the flow).
+        pressure_drop: ``Δp = p_inlet − p_outlet`` (finite; negative reverses the flow;
+            default 1). Not used with ``gas=True``.
         dx: grid spacing; required for a gap array, taken from a state.
         periodic: wrap across the flow; ``None``: the state's ``boundary == "periodic"``
             (no wrap for a gap array).
@@ -150,6 +175,10 @@ def flow(
             ``"multigrid"`` (conjugate gradients, aggregation-multigrid preconditioner, to
             ``tol``), or ``"auto"`` (default: Cholesky up to 4 million cells with unknowns,
             multigrid above).
+        gas: isothermal ideal gas instead of an incompressible liquid (module docstring);
+            needs ``inlet_pressure`` and ``outlet_pressure`` (absolute, ``≥ 0``),
+            ``gas_constant`` ``R_s`` (specific, e.g. 287.05 J/(kg K) for air) and
+            ``temperature`` ``T`` (absolute, > 0). ``viscosity`` is the gas's.
 
     Raises:
         InvalidArgumentError: naming the argument (NaN or infinite gaps, negative gaps off
@@ -164,7 +193,49 @@ def flow(
         raise InvalidArgumentError(f"axis: must be 0 or 1, got {axis!r}", argument="axis")
     axis = int(axis)
     eta = _number("viscosity", viscosity, positive=True)
-    dp = _number("pressure_drop", pressure_drop)
+    if not isinstance(gas, (bool, np.bool_)):
+        raise InvalidArgumentError(f"gas: must be True or False, got {gas!r}", argument="gas")
+    gas_inputs = {
+        "inlet_pressure": inlet_pressure,
+        "outlet_pressure": outlet_pressure,
+        "gas_constant": gas_constant,
+        "temperature": temperature,
+    }
+    if gas:
+        if pressure_drop is not None:
+            raise InvalidArgumentError(
+                "pressure_drop: not used for a gas; give inlet_pressure and outlet_pressure "
+                "(absolute)",
+                argument="pressure_drop",
+            )
+        for name, value in gas_inputs.items():
+            if value is None:
+                raise InvalidArgumentError(
+                    f"{name}: required with gas=True; pass {name}=", argument=name
+                )
+        p_in = _number("inlet_pressure", inlet_pressure)
+        p_out = _number("outlet_pressure", outlet_pressure)
+        for name, v in (("inlet_pressure", p_in), ("outlet_pressure", p_out)):
+            if v < 0:
+                raise InvalidArgumentError(
+                    f"{name}: an absolute pressure must be ≥ 0, got {v!r}", argument=name
+                )
+        r_s = _number("gas_constant", gas_constant, positive=True)
+        temp = _number("temperature", temperature, positive=True)
+        # φ = p² obeys the liquid's equation: solve it with Δφ = p_in² − p_out².
+        dp = p_in * p_in - p_out * p_out
+        if not np.isfinite(dp):
+            raise InvalidArgumentError(
+                "inlet_pressure: p_in² − p_out² overflows; express pressures in a larger unit",
+                argument="inlet_pressure",
+            )
+    else:
+        for name, value in gas_inputs.items():
+            if value is not None:
+                raise InvalidArgumentError(
+                    f"{name}: only used with gas=True", argument=name
+                )
+        dp = _number("pressure_drop", 1.0 if pressure_drop is None else pressure_drop)
     tol_f = _number("tol", tol, positive=True)
     if tol_f >= 1:
         raise InvalidArgumentError(f"tol: must be in (0, 1), got {tol!r}", argument="tol")
@@ -262,15 +333,36 @@ def flow(
     n_along, n_across = (ny, nx) if axis == 0 else (nx, ny)
     conductance = float(res["conductance"])
     permeability = conductance * eta * n_along / n_across
+    q_out, q_in = float(res["flow_rate"]), float(res["inlet_flow_rate"])
+    pressure, f0, f1 = res["pressure"], res["flux_axis0"], res["flux_axis1"]
+    gas_fields: dict[str, Any] = {}
+    if gas:
+        scale = 1.0 / (2.0 * r_s * temp)  # φ-flux → mass flux
+        mass = q_out * scale
+        rho_out = p_out / (r_s * temp)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            q_out = mass / rho_out if rho_out > 0 else float("inf")
+            q_in = q_in * scale / rho_out if rho_out > 0 else float("inf")
+        pressure = np.sqrt(np.maximum(pressure + p_out * p_out, 0.0))
+        f0, f1 = f0 * scale, f1 * scale
+        dp = p_in - p_out
+        gas_fields = {
+            "gas": True,
+            "mass_flow_rate": mass,
+            "inlet_pressure": p_in,
+            "outlet_pressure": p_out,
+            "gas_constant": r_s,
+            "temperature": temp,
+        }
     return Flow(
-        flow_rate=float(res["flow_rate"]),
-        inlet_flow_rate=float(res["inlet_flow_rate"]),
+        flow_rate=q_out,
+        inlet_flow_rate=q_in,
         conductance=conductance,
         permeability=permeability,
         hydraulic_aperture=float(np.cbrt(12.0 * permeability)),
-        pressure=res["pressure"],
-        flux_axis0=res["flux_axis0"],
-        flux_axis1=res["flux_axis1"],
+        pressure=pressure,
+        flux_axis0=f0,
+        flux_axis1=f1,
         residual=float(res["residual"]),
         conservation=float(res["conservation"]),
         iterations=int(res["iterations"]),
@@ -281,4 +373,5 @@ def flow(
         periodic=wrap,
         dx=dx_f,
         seconds=float(res["seconds"]),
+        **gas_fields,
     )
