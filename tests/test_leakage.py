@@ -124,6 +124,19 @@ def test_a_free_cell_with_zero_gap_is_closed_for_both():
     assert perc.percolates and f.flow_rate > 0.0
 
 
+@pytest.mark.parametrize("neck", [1e-60, 1e-120, 1e-200, 5e-324])
+def test_an_open_neck_whose_cube_underflows_still_conducts(neck):
+    """g > 0 is open for both, even when (g/g_max)³ or a face's product underflows."""
+    gap = np.zeros((6, 5))
+    gap[:, 2] = 1.0
+    gap[3, 2] = neck
+    perc = leakpath.percolation(gap, dx=1.0, axis=0)
+    f = leakpath.flow(gap, dx=1.0, axis=0)
+    assert perc.percolates
+    assert f.flow_rate > 0.0 and f.percolates
+    assert np.array_equal(np.isfinite(f.pressure), gap > 0)
+
+
 def _bfs_spans(open_: np.ndarray, periodic: bool) -> bool:
     """Plain breadth-first search: does an open 4-connected path join row 0 to the last row?"""
     ny, nx = open_.shape

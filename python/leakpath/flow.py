@@ -40,6 +40,13 @@ from .errors import InvalidArgumentError
 
 __all__ = ["DEFAULT_TOL", "Flow", "flow"]
 
+#: Open gaps below this fraction of the largest open gap are raised to it, so that every open
+#: cell's conductance ``(g/g_max)³`` and every face's harmonic mean (a product of two of
+#: them) is a positive double: otherwise an open cell whose gap is below ~1e-54 g_max would
+#: conduct nothing while :func:`leakpath.percolation` counts it open. Such a neck passes
+#: ~1e-150 of the flow of the largest gap: no gap a contact solve returns is that small.
+GAP_FLOOR = 1e-50
+
 #: Default relative residual ``‖b − Ax‖₂/‖b‖₂`` (also the aimed inlet/outlet agreement).
 DEFAULT_TOL = 1e-12
 
@@ -129,6 +136,23 @@ def _number(name: str, value: Any, *, positive: bool = False) -> float:
         what = "a positive finite number" if positive else "a finite number"
         raise InvalidArgumentError(f"{name}: must be {what}, got {value!r}", argument=name)
     return v
+
+
+def _floor_open_gaps(gap: np.ndarray, contact: np.ndarray | None) -> np.ndarray:
+    """The gap with open gaps (``g > 0`` off contact) raised to ``GAP_FLOOR·g_max``
+    (a new array only if any is below)."""
+    open_ = gap > 0
+    if contact is not None:
+        open_ &= ~contact
+    if not open_.any():
+        return gap
+    floor = float(gap[open_].max()) * GAP_FLOOR
+    if not np.isfinite(floor):  # infinite gaps: refused by the core with its message
+        return gap
+    tiny = open_ & (gap < floor)
+    if not tiny.any():
+        return gap
+    return np.ascontiguousarray(np.where(tiny, floor, gap))
 
 
 def _is_state(obj: Any) -> bool:
@@ -309,6 +333,8 @@ def flow(
         raise InvalidArgumentError(
             f"periodic: must be True, False or None, got {periodic!r}", argument="periodic"
         )
+
+    gap = _floor_open_gaps(gap, contact)
 
     if solver not in ("auto", "cholesky", "multigrid"):
         raise InvalidArgumentError(
