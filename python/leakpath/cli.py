@@ -33,7 +33,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
-from . import __version__, _validate
+from . import __version__, _validate, leakage  # leakage: --flow, --flow-axis, --flux-maps
 from .errors import InvalidArgumentError, LeakpathError
 from .moments import nayak_moments
 from .surfaces import FILL_METHODS, Surface, load, rmd, spectral
@@ -294,6 +294,7 @@ _SUMMARY_COLUMNS: tuple[tuple[str, str], ...] = (
     ("mean_gap_star", "gbar*"),
     ("m0_star", "m0*"),
     ("m2_star", "m2*"),
+    ("K_star", "K*"),  # leakpath.leakage
 )
 
 #: Keys accepted in a SURFACE spec, with their converters.
@@ -366,7 +367,8 @@ def _surface_from_arg(text: str, dx: float | None, fill: str | None = None) -> S
 
 _OWN_PATTERNS = {
     CHECKPOINT_DIR: ("manifest.json", "level_*.json", "level_*.npz", ".*.tmp"),
-    FIGURES_DIR: ("fig*.png", "fig*.pdf", "map_k*.png", "map_k*.pdf", ".*.tmp"),
+    FIGURES_DIR: ("fig*.png", "fig*.pdf", "map_k*.png", "map_k*.pdf", ".*.tmp")
+    + leakage.FIGURE_PATTERNS,
 }
 
 
@@ -411,6 +413,9 @@ def format_summary(rows: Sequence[dict[str, Any]]) -> str:
         cells = []
         for key, _ in _SUMMARY_COLUMNS:
             v = row[key]
+            if key == "K_star":  # leakpath.leakage: spans decades
+                cells.append(f"{v:.3e}")
+                continue
             cells.append(str(v) if isinstance(v, int) else f"{v:.4f}")
         body.append(cells)
     widths = [max(len(h), *(len(r[i]) for r in body)) for i, h in enumerate(header)]
@@ -464,6 +469,7 @@ def _run_sweep(
             keep_fields=keep_fields,
             progress=sys.stderr.isatty(),
             checkpoint_dir=out / CHECKPOINT_DIR,
+            **leakage.sweep_flow_options(args),  # leakpath.leakage
         )
     except CheckpointMismatch as exc:
         raise UsageError(
@@ -480,6 +486,9 @@ def _run_sweep(
     if keep_fields:
         files["fields"] = result.save_fields(out / FIELDS_NAME)
     figures = result.plot(out / FIGURES_DIR)
+    from .flow_figures import save_flow_figures  # leak-rate figures (fig4, flux maps)
+
+    figures += save_flow_figures(result, out / FIGURES_DIR, flux_levels=args.flux_maps)
     extra = {
         "command": command,
         "argv": list(argv) if argv is not None else sys.argv[1:],
@@ -632,6 +641,7 @@ def _add_paper_parser(subparsers: Any) -> None:
         "default: start each level from the previous one (the same minimiser, faster)",
     )
     warm.add_argument("--warm-start", action="store_true", help="the default; kept for scripts")
+    leakage.add_flow_arguments(p)  # leakpath.leakage
     _add_sweep_output_arguments(p, "paper-results")
     p.set_defaults(func=_cmd_paper)
 
@@ -737,6 +747,7 @@ def _add_sweep_parser(subparsers: Any) -> None:
         action="store_true",
         help="also write per-level pressure, gap and cluster labels to fields.npz",
     )
+    leakage.add_flow_arguments(p)  # leakpath.leakage
     _add_sweep_output_arguments(p, "sweep-results")
     p.set_defaults(func=_cmd_sweep)
 

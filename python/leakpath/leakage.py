@@ -112,3 +112,55 @@ def flow_star(row: dict[str, Any], k_ref: float) -> float:
     if not (math.isfinite(k) and math.isfinite(k_ref)) or k_ref == 0:
         return math.nan
     return k / k_ref
+
+
+# ---------------------------------------------------------------------------- command line
+#: Figure files of :mod:`leakpath.flow_figures` (for ``--overwrite`` to clear).
+FIGURE_PATTERNS: tuple[str, ...] = ("flux_k*.png", "flux_k*.pdf")
+
+
+def _level_list(text: str) -> list[int]:
+    import argparse
+
+    try:
+        values = [int(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected comma-separated row indices such as 10,19, got {text!r}"
+        ) from None
+    if not values or min(values) < 0:
+        raise argparse.ArgumentTypeError(f"expected row indices ≥ 0, got {text!r}")
+    return values
+
+
+def add_flow_arguments(p: Any) -> None:
+    """``--flow/--no-flow``, ``--flow-axis`` and ``--flux-maps`` of ``leakpath sweep`` and
+    ``leakpath paper``."""
+    import argparse
+
+    p.add_argument(
+        "--flow",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="leak-rate columns Q, K, K* and their figures (default: on up to 513 x 513 "
+        "points, off above)",
+    )
+    p.add_argument(
+        "--flow-axis",
+        type=int,
+        choices=(0, 1),
+        default=None,
+        help="direction of the leak (default: --axis when it is 0 or 1, else 0)",
+    )
+    p.add_argument(
+        "--flux-maps",
+        type=_level_list,
+        default=None,
+        metavar="K1,K2,...",
+        help="rows whose flux magnitude to map (default: the last leaking row)",
+    )
+
+
+def sweep_flow_options(args: Any) -> dict[str, Any]:
+    """``flow``/``flow_axis`` keyword arguments of :func:`leakpath.sweep` from the CLI."""
+    return {"flow": getattr(args, "flow", None), "flow_axis": getattr(args, "flow_axis", None)}
