@@ -217,6 +217,7 @@ _GENERATORS: dict[str, tuple[frozenset[str], frozenset[str]]] = {
     ),
 }
 _OWN_FILES = ("manifest.json", "aggregate.csv", "thresholds.csv", "ensemble.json")
+_OWN_FILES += ("leakage.csv", "leak_thresholds.csv")  # leakpath.ensemble_leakage
 _OWN_DIRS = ("tasks", "figures")
 _KILL_ENV = "LEAKPATH_TEST_KILL_ONCE"
 _STOP_ENV = "LEAKPATH_TEST_STOP_AFTER"
@@ -1160,9 +1161,11 @@ def aggregate(
     agg_rows: list[dict[str, Any]] = []
     thr_rows: list[dict[str, Any]] = []
     summary: dict[str, dict[str, Any]] = {}
+    leak_sets = []  # leakpath.ensemble_leakage
     for ps in param_sets:
         seeds = sorted(ps.seeds)
         tables = [_read_table(_task_csv(directory, ps.key, s)) for s in seeds]
+        leak_sets.append((ps, seeds, tables))  # leakpath.ensemble_leakage
         agg_rows += _aggregate_set(ps, tables, param_names)
         set_thr = []
         for seed, table in zip(seeds, tables, strict=True):
@@ -1192,6 +1195,9 @@ def aggregate(
     thr_columns = ["param_key", *param_names, *THRESHOLD_COLUMNS]
     atomic_write_text(directory / "aggregate.csv", _csv(agg_rows, agg_columns))
     atomic_write_text(directory / "thresholds.csv", _csv(thr_rows, thr_columns))
+    from .ensemble_leakage import write_leak_statistics  # leak-rate bands and thresholds
+
+    leak_summary = write_leak_statistics(directory, leak_sets, param_names, axis, figures)
 
     result = EnsembleResult(
         directory=directory,
@@ -1227,6 +1233,7 @@ def aggregate(
             "indicator); distribution statistics over surfaces with found = true"
         ),
         "thresholds": summary,
+        "leakage": leak_summary,  # leakpath.ensemble_leakage
         "run": result.run,
         "files": {
             "aggregate": "aggregate.csv",
