@@ -43,6 +43,8 @@ column                 definition                                               
 ``kkt_restarts``       exact re-solves from the returned contact set needed to reach the
                        KKT acceptance threshold :data:`KKT_ACCEPT` (normally 0)
 ``kkt``                KKT certificate of the accepted solution, relative to ``h_s``
+``Q K K_star``         leak rate, permeability and ``K/K(Δ = 0)`` along ``flow_axis``     L³, L³,
+                       (:mod:`leakpath.leakage`; NaN with ``flow=False``)                1
 =====================  ================================================================  =====
 
 ``V = V_pg + V_dead + V_trapped`` for each axis (to round-off). Wall-clock ``seconds`` per
