@@ -40,7 +40,7 @@ from pathlib import Path
 import numpy as np
 
 from leakpath import _core
-from leakpath.percolation import percolation
+from leakpath._percolation import percolation
 
 try:
     import scipy.ndimage as ndimage

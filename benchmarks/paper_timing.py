@@ -40,7 +40,7 @@ from pathlib import Path
 import numpy as np
 
 import leakpath
-from leakpath.sweep import machine_info
+from leakpath._io import machine_info
 
 CONFIGS: dict[str, list[str]] = {
     "cold (default: auto solver, no warm start)": [],

@@ -13,7 +13,8 @@ import pytest
 
 import leakpath
 from leakpath import cli
-from leakpath.surfaces import load, rmd, spectral
+from leakpath.generators import rmd, spectral
+from leakpath.surfaces import load
 
 
 def run(command: str, *extra: str, cwd=None) -> subprocess.CompletedProcess[str]:

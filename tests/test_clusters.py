@@ -16,7 +16,7 @@ import pytest
 ndimage = pytest.importorskip("scipy.ndimage")
 
 from leakpath import _core  # noqa: E402
-from leakpath.percolation import (  # noqa: E402
+from leakpath._percolation import (  # noqa: E402
     CLASS_NAMES,
     DEAD_END,
     SPANNING,
@@ -421,8 +421,8 @@ def test_contact_state_and_boundary() -> None:
 
 def test_real_contact_state() -> None:
     contact_mod = pytest.importorskip("leakpath.contact")
-    surfaces = pytest.importorskip("leakpath.surfaces")
-    surf = surfaces.rmd(5, 2.1, seed=1)
+    generators = pytest.importorskip("leakpath.generators")
+    surf = generators.rmd(5, 2.1, seed=1)
     state = contact_mod.solve(surf, 0.5 * surf.height_range)
     p = percolation(state)
     assert p.free_area == int((~state.contact).sum())

@@ -20,7 +20,7 @@ from pathlib import Path
 import pytest
 
 from leakpath.ensemble import ensemble
-from leakpath.plots import remove_stale_temporaries
+from leakpath.plotting import remove_stale_temporaries
 
 SCRIPT = """
 from leakpath.ensemble import ensemble

@@ -16,8 +16,8 @@ import pytest
 from scipy import ndimage
 
 import leakpath
+from leakpath import sweep
 from leakpath.contact import AUTO_ACTIVE_SET_MAX_POINTS, ContactProblem, solve
-from leakpath.sweep import sweep
 
 LEVELS = 10
 

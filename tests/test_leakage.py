@@ -15,11 +15,11 @@ import numpy as np
 import pytest
 
 import leakpath
-from leakpath import leakage
+from leakpath import CheckpointMismatch, leakage, sweep
+from leakpath._table import COLUMNS
 from leakpath.contact import ContactProblem
 from leakpath.errors import InvalidArgumentError
 from leakpath.surfaces import Surface
-from leakpath.sweep import COLUMNS, CheckpointMismatch, sweep
 
 
 def _grooves(ny=24, nx=20, seed=5):
@@ -191,7 +191,7 @@ def test_flow_figures_and_cli_columns(tmp_path):
     import subprocess
     import sys
 
-    from leakpath.flow_figures import flux_magnitude, level_flow, save_flow_figures
+    from leakpath.plotting.flow import flux_magnitude, level_flow, save_flow_figures
 
     s = leakpath.spectral(32, 0.8, seed=6, rms_height=1.0)
     r = sweep(s, levels=6, boundary="periodic", keep_fields=True)

@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 
 from leakpath import moments as mom
+from leakpath.generators import rmd, spectral
 from leakpath.moments import Moments, nayak_moments, rms_curvature, rms_height, rms_slope
-from leakpath.surfaces import rmd, spectral
 
 
 def lagrange_cos_sum(a: float, b: float, count: int) -> float:

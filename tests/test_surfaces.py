@@ -20,7 +20,8 @@ import pytest
 
 from leakpath import surfaces
 from leakpath.errors import InvalidArgumentError, ProblemTooLargeError
-from leakpath.surfaces import Surface, load, rmd, spectral
+from leakpath.generators import rmd, spectral
+from leakpath.surfaces import Surface, load
 
 SIGMA0 = 1.0 / math.sqrt(0.09)
 

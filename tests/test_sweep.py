@@ -19,8 +19,8 @@ import time
 import numpy as np
 import pytest
 
-from leakpath import rmd
-from leakpath.sweep import COLUMNS, SweepResult, sweep
+from leakpath import SweepResult, rmd, sweep
+from leakpath._table import COLUMNS
 
 LEVELS = 10
 

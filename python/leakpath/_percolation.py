@@ -47,6 +47,7 @@ __all__ = [
     "SPANNING",
     "TRAPPED",
     "Percolation",
+    "label",
     "percolation",
 ]
 
@@ -268,3 +269,57 @@ def percolation(
         periodic=wrap,
         dx=dx_f,
     )
+
+
+def label(
+    free: Any,
+    *,
+    connectivity: int = 4,
+    periodic: tuple[bool, bool] = (False, False),
+    threads: int | None = None,
+) -> tuple[np.ndarray, int]:
+    """Connected components of a boolean mask (``True`` = free): the labelling behind
+    :func:`percolation`, for any mask.
+
+    Args:
+        free: (ny, nx) boolean mask.
+        connectivity: 4 (edge neighbours, default) or 8 (edges and corners).
+        periodic: ``(wrap rows, wrap columns)``: whether the first and last row (column)
+            are neighbours.
+        threads: worker threads (default: all cores); the labels do not depend on it.
+
+    Returns:
+        ``(labels, K)``: ``uint32`` labels of the mask's shape, 0 off the mask and ``1..K`` on
+        it, numbered in raster order of each cluster's first cell (as
+        ``scipy.ndimage.label`` numbers them).
+
+    Raises:
+        leakpath.errors.InvalidArgumentError: a mask that is not 2-D boolean, a bad
+            ``connectivity``, ``periodic`` or ``threads``.
+    """
+    mask = np.asarray(free)
+    if mask.dtype != np.bool_ or mask.ndim != 2:
+        raise InvalidArgumentError(
+            f"free: must be a 2-D boolean mask, got dtype {mask.dtype} with {mask.ndim} "
+            "dimensions; pass e.g. gap > 0",
+            argument="free",
+        )
+    conn = _validate.connectivity(connectivity)
+    if not (isinstance(periodic, tuple) and len(periodic) == 2):
+        raise InvalidArgumentError(
+            f"periodic: must be a pair of booleans (rows, columns), got {periodic!r}",
+            argument="periodic",
+        )
+    wrap0 = _validate.flag("periodic", periodic[0])
+    wrap1 = _validate.flag("periodic", periodic[1])
+    threads = _validate.optional_integer(
+        "threads", threads, low=1, high=4096, what="a positive integer (at most 4096) or None"
+    )
+    labels, k = _core.label_clusters(
+        np.ascontiguousarray(mask),
+        connectivity=conn,
+        periodic_axis0=wrap0,
+        periodic_axis1=wrap1,
+        threads=threads,
+    )
+    return labels, int(k)

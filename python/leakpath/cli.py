@@ -33,10 +33,12 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
-from . import __version__, _validate, leakage  # leakage: --flow, --flow-axis, --flux-maps
+from . import _validate, leakage
+from ._core import __version__  # leakage: --flow, --flow-axis, --flux-maps
 from .errors import InvalidArgumentError, LeakpathError
+from .generators import _shape_text, generate, parse_spec, rmd, spectral
 from .moments import nayak_moments
-from .surfaces import FILL_METHODS, Surface, load, rmd, spectral
+from .surfaces import FILL_METHODS, Surface, load
 
 __all__ = [
     "main",
@@ -189,16 +191,10 @@ def _add_output_arguments(p: argparse.ArgumentParser) -> None:
 
 def _shape_arg(text: str) -> tuple[int, int]:
     """Parse ``N`` or ``NYxNX`` (also ``NY,NX``)."""
-    parts = text.lower().replace(",", "x").split("x")
     try:
-        dims = [int(p) for p in parts]
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected N or NYxNX, got {text!r}") from None
-    if len(dims) == 1:
-        return dims[0], dims[0]
-    if len(dims) == 2:
-        return dims[0], dims[1]
-    raise argparse.ArgumentTypeError(f"expected N or NYxNX, got {text!r}")
+        return _shape_text(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def _cmd_surface_rmd(args: argparse.Namespace) -> int:
@@ -297,65 +293,20 @@ _SUMMARY_COLUMNS: tuple[tuple[str, str], ...] = (
     ("K_star", "K*"),  # leakpath.leakage
 )
 
-#: Keys accepted in a SURFACE spec, with their converters.
-_SPEC_KEYS: dict[str, dict[str, Callable[[str], Any]]] = {
-    "rmd": {"m": int, "D": float, "seed": int, "sigma0": float, "length": float},
-    "spectral": {
-        "n": _shape_arg,
-        "hurst": float,
-        "seed": int,
-        "length": float,
-        "rms_height": float,
-        "rms_slope": float,
-        "long_cutoff": float,
-        "short_cutoff": float,
-    },
-}
-_SPEC_REQUIRED = {"rmd": ("m", "D", "seed"), "spectral": ("n", "hurst", "seed")}
-
-
-def parse_surface_spec(text: str) -> tuple[str, dict[str, Any]] | None:
-    """Parse ``rmd:m=8,D=2.3,seed=4`` or ``spectral:n=256,hurst=0.8,seed=1,rms_height=1``.
-
-    Returns ``(generator, keyword arguments)``, or ``None`` when ``text`` is not a spec (then
-    it names a file). Raises :class:`UsageError` for a malformed spec.
-    """
-    gen, sep, rest = text.partition(":")
-    if not sep or gen.lower() not in _SPEC_KEYS:
-        return None
-    gen = gen.lower()
-    allowed = _SPEC_KEYS[gen]
-    kwargs: dict[str, Any] = {}
-    for item in filter(None, (part.strip() for part in rest.split(","))):
-        key, eq, value = item.partition("=")
-        key = key.strip().replace("-", "_")
-        if not eq or key not in allowed:
-            raise UsageError(
-                f"SURFACE spec {text!r}: unknown or malformed item {item!r}; "
-                f"{gen} takes {', '.join(f'{k}=' for k in allowed)}"
-            )
-        try:
-            kwargs[key] = allowed[key](value.strip())
-        except (ValueError, argparse.ArgumentTypeError):
-            raise UsageError(f"SURFACE spec {text!r}: bad value for {key}: {value!r}") from None
-    missing = [k for k in _SPEC_REQUIRED[gen] if k not in kwargs]
-    if missing:
-        example = "rmd:m=7,D=2.1,seed=0" if gen == "rmd" else "spectral:n=256,hurst=0.8,seed=1"
-        raise UsageError(f"SURFACE spec {text!r}: missing {', '.join(missing)} (e.g. {example})")
-    return gen, kwargs
+def parse_surface_spec(text: str) -> tuple[str, dict[str, Any], int] | None:
+    """:func:`leakpath.generators.parse_spec`: ``(generator, parameters, seed)`` or ``None``."""
+    return parse_spec(text)
 
 
 def _surface_from_arg(text: str, dx: float | None, fill: str | None = None) -> Surface:
     spec = parse_surface_spec(text)
     if spec is not None:
-        gen, kwargs = spec
+        gen, params, seed = spec
         if dx is not None:
             raise UsageError("--dx applies to surface files only, not to a generator spec")
         if fill is not None:
             raise UsageError("--fill applies to surface files only, not to a generator spec")
-        if gen == "rmd":
-            return rmd(kwargs.pop("m"), kwargs.pop("D"), **kwargs)
-        return spectral(kwargs.pop("n"), kwargs.pop("hurst"), **kwargs)
+        return generate(gen, params, seed)
     path = Path(text)
     if not path.exists():
         raise UsageError(
@@ -442,8 +393,9 @@ def _run_sweep(
     argv: Sequence[str] | None = None,
 ) -> int:
     """Run a sweep into ``args.out`` and print its summary (table or JSON)."""
+    from ._checkpoint import CheckpointMismatch
+    from ._sweep import _check_levels, sweep
     from .contact import contact_modulus
-    from .sweep import CheckpointMismatch, _check_levels, sweep
 
     out: Path = args.out
     contact_modulus(E, nu)  # validate before touching the output directory
@@ -486,7 +438,7 @@ def _run_sweep(
     if keep_fields:
         files["fields"] = result.save_fields(out / FIELDS_NAME)
     figures = result.plot(out / FIGURES_DIR)
-    from .flow_figures import save_flow_figures  # leak-rate figures (fig4, flux maps)
+    from .plotting.flow import save_flow_figures  # leak-rate figures (fig4, flux maps)
 
     figures += save_flow_figures(result, out / FIGURES_DIR, flux_levels=args.flux_maps)
     extra = {
@@ -757,8 +709,8 @@ def _cmd_flow(args: argparse.Namespace) -> int:
     import numpy as np
 
     from . import _core
+    from ._flow import flow
     from .contact import contact_modulus, default_memory_limit, solve
-    from .flow import flow
 
     surface = _surface_from_arg(args.surface, args.dx)
     e_star = contact_modulus(args.E, args.nu)

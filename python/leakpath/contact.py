@@ -30,8 +30,8 @@ from .errors import InvalidArgumentError
 from .surfaces import Surface
 
 if TYPE_CHECKING:
-    from .flow import Flow
-    from .percolation import Percolation
+    from ._flow import Flow
+    from ._percolation import Percolation
 
 Boundary = Literal["free", "periodic"]
 SolverName = Literal["lawson-hanson", "active-set", "polonsky-keer", "auto"]
@@ -166,7 +166,7 @@ class ContactState:
 
     def percolation(self, axis: Any = 0, connectivity: int = 4) -> Percolation:
         """Percolation classes of the free region (see :func:`leakpath.percolation`)."""
-        from .percolation import percolation
+        from ._percolation import percolation
 
         key = (axis, connectivity)
         cache = self.__dict__.setdefault("_percolation_cache", {})
@@ -206,7 +206,7 @@ class ContactState:
 
     def flow(self, **kw: Any) -> Flow:
         """Leak rate: Reynolds flow through this gap (see :func:`leakpath.flow.flow`)."""
-        from .flow import flow
+        from ._flow import flow
 
         return flow(self, **kw)
 

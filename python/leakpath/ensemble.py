@@ -149,11 +149,12 @@ from typing import Any
 
 import numpy as np
 
-from . import __version__
+from ._core import __version__
+from ._io import atomic_write_bytes, atomic_write_text, machine_info
+from ._io import dumps as _dumps
+from ._sweep import sweep as _sweep
 from .contact import SOLVERS, contact_modulus
 from .surfaces import Surface
-from .sweep import _dumps, atomic_write_bytes, atomic_write_text, machine_info
-from .sweep import sweep as _sweep
 
 __all__ = [
     "ensemble",
@@ -554,11 +555,11 @@ def _generate(generator: Any, params: Mapping[str, Any], seed: int) -> Surface:
     """The surface of one task: ``generator(**params, seed=seed)``."""
     kwargs = dict(params)
     if generator == "rmd":
-        from .surfaces import rmd
+        from .generators import rmd
 
         return rmd(seed=seed, **kwargs)
     if generator == "spectral":
-        from .surfaces import spectral
+        from .generators import spectral
 
         if isinstance(kwargs.get("shape"), list):
             kwargs["shape"] = tuple(kwargs["shape"])

@@ -138,8 +138,8 @@ def write_leak_statistics(
     """Write ``leakage.csv`` and ``leak_thresholds.csv`` (and ``figures/leak_bands``) for the
     ensemble in ``directory``; ``sets`` holds ``(param_set, seeds, tables)``. Returns the
     summary for ``ensemble.json`` (empty when the tables carry no leak-rate columns)."""
+    from ._io import atomic_write_text
     from .ensemble import _csv, _describe
-    from .sweep import atomic_write_text
 
     if not sets or not all(has_flow(t) for _, _, tables in sets for t in tables):
         return {}
@@ -187,7 +187,7 @@ def write_leak_statistics(
 def _save_band_figure(outdir: Path, curves: Mapping[str, Any]) -> list[Path]:
     from matplotlib.figure import Figure
 
-    from .plots import save_figure
+    from .plotting.paper import save_figure
 
     fig = Figure(figsize=(7.0, 4.6), layout="constrained")
     ax = fig.subplots()

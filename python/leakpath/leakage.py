@@ -30,8 +30,8 @@ from typing import Any
 
 import numpy as np
 
+from ._flow import flow
 from .errors import InvalidArgumentError
-from .flow import flow
 
 __all__ = [
     "FLOW_AUTO_MAX_POINTS",

@@ -46,7 +46,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass
-from typing import TYPE_CHECKING, Any, Literal
+from typing import Any, Literal, Protocol
 
 import numpy as np
 import numpy.typing as npt
@@ -54,8 +54,23 @@ import numpy.typing as npt
 from . import _validate
 from .errors import InvalidArgumentError
 
-if TYPE_CHECKING:  # pragma: no cover
-    from .surfaces import Surface
+
+class _HeightMap(Protocol):
+    """Anything with ``heights`` and ``dx`` (e.g. :class:`leakpath.Surface`)."""
+
+    heights: np.ndarray
+    dx: float
+
+
+Surface = _HeightMap  # the annotations below accept a Surface structurally
+
+
+def _as_height_map(obj: Any) -> tuple[np.ndarray, float] | None:
+    """``(heights, dx)`` of a surface-like object, ``None`` for arrays and array-likes."""
+    if isinstance(obj, np.ndarray) or not (hasattr(obj, "heights") and hasattr(obj, "dx")):
+        return None
+    return obj.heights, float(obj.dx)
+
 
 __all__ = ["Moments", "nayak_moments", "rms_height", "rms_slope", "rms_curvature"]
 
@@ -89,16 +104,15 @@ class Moments:
 
 
 def _coerce(heights: Any, dx: float | None, *, min_points: int) -> tuple[FloatArray, float]:
-    """Validate ``heights``/``dx`` (or a :class:`~leakpath.surfaces.Surface`); return both."""
-    from .surfaces import Surface  # local import: surfaces imports this module
-
-    if isinstance(heights, Surface):
-        if dx is not None and _validate.spacing("dx", dx) != heights.dx:
+    """Validate ``heights``/``dx`` (or a :class:`~leakpath.Surface`); return both."""
+    parts = _as_height_map(heights)
+    if parts is not None:
+        if dx is not None and _validate.spacing("dx", dx) != parts[1]:
             raise InvalidArgumentError(
-                f"dx: {dx!r} differs from the surface's dx={heights.dx!r}; "
+                f"dx: {dx!r} differs from the surface's dx={parts[1]!r}; "
                 "omit dx when passing a Surface"
             )
-        return heights.heights, heights.dx
+        return parts
     arr = _validate.real_array("heights", heights, finite=False, copy=False)
     # Differences and their squares: a few temporaries of the heights' size.
     limit = _validate.memory_budget()
@@ -192,7 +206,7 @@ def nayak_moments(
     ----------
     heights : (ny, nx) array_like or Surface
         Heights ``s[i, j]`` (axis 0 = y, axis 1 = x); at least 3 points per axis, all finite.
-        A :class:`~leakpath.surfaces.Surface` supplies its own ``dx``.
+        A :class:`~leakpath.Surface` supplies its own ``dx``.
     dx : float, optional
         Grid spacing [length]; required for a plain array.
     method : {"fd", "spectral"}
@@ -273,10 +287,9 @@ def rms_height(heights: FloatArray | Surface | npt.ArrayLike) -> float:
     float
         ``h_rms`` in the unit of the heights.
     """
-    from .surfaces import Surface
-
-    if isinstance(heights, Surface):
-        s = heights.heights
+    parts = _as_height_map(heights)
+    if parts is not None:
+        s = parts[0]
     else:
         s, _ = _coerce(heights, 1.0, min_points=1)
     d = s - float(np.mean(s))

@@ -1,6 +1,6 @@
 """Leak-rate figures of a sweep (matplotlib, object-oriented, no pyplot state).
 
-In the style of :mod:`leakpath.plots`; columns as in :mod:`leakpath.leakage`.
+In the style of :mod:`leakpath.plotting`; columns as in :mod:`leakpath.leakage`.
 
 ==========================  ==============================================================
 file stem                   content
@@ -23,18 +23,16 @@ from __future__ import annotations
 import os
 from collections.abc import Iterable, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.colors import LogNorm
 from matplotlib.figure import Figure
 
-from .errors import InvalidArgumentError
-from .flow import Flow, flow
-
-if TYPE_CHECKING:  # pragma: no cover
-    from .sweep import SweepResult
+from .._flow import Flow, flow
+from ..errors import InvalidArgumentError
+from ._types import SweepLike as SweepResult
 
 __all__ = [
     "flux_magnitude",
@@ -110,7 +108,7 @@ def level_flow(result: SweepResult, k: int) -> Flow:
         gap = np.maximum(result.fields["gap"][k], 0.0)
         contact = result.fields["pressure"][k] > 0
         return flow(gap, dx=result.surface.dx, contact=contact, axis=axis, periodic=periodic)
-    from .contact import ContactProblem
+    from ..contact import ContactProblem
 
     par = result.parameters
     prob = ContactProblem(
@@ -161,7 +159,7 @@ def plot_flux_map(
 
 def figure_flux_map(result: SweepResult, k: int) -> Figure:
     """Flux magnitude at row ``k``, titled with ``Δ*``, contact fraction and ``K*``."""
-    from .plots import _unit
+    from .paper import _unit
 
     row = result.rows[k]
     f = level_flow(result, k)
@@ -186,7 +184,7 @@ def save_flow_figures(
 ) -> list[Path]:
     """Write ``fig4_leak_rate`` and one flux map per row in ``flux_levels`` (default: the
     last leaking row) into ``outdir``; nothing when the sweep has no leak-rate columns."""
-    from .plots import save_figure
+    from .paper import save_figure
 
     if isinstance(formats, str):
         formats = (formats,)

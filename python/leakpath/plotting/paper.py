@@ -27,7 +27,7 @@ import io
 import os
 from collections.abc import Iterable, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 from matplotlib.axes import Axes
@@ -35,11 +35,9 @@ from matplotlib.colors import BoundaryNorm, ListedColormap
 from matplotlib.figure import Figure
 from matplotlib.patches import Patch
 
-from .sweep import atomic_write_bytes
-
-if TYPE_CHECKING:  # pragma: no cover
-    from .surfaces import Surface
-    from .sweep import SweepResult
+from .._io import atomic_write_bytes
+from ._types import SurfaceLike as Surface
+from ._types import SweepLike as SweepResult
 
 __all__ = [
     "CLASS_COLOURS",

@@ -1,0 +1,547 @@
+"""Sweeps over the imposed approach: the paper's experiment as a table (``docs/conventions.md``).
+
+A sweep presses one rough surface against the rigid flat at a sequence of increasing imposed
+approaches ``Δ_0 < Δ_1 < …`` and records, per level, the contact, the free volume, its
+percolation classes along both in-plane axes and Nayak's moments of the deformed surface.
+
+Levels
+------
+By default ``Δ_k = k·Δ_max/levels``, ``k = 0 … levels`` (``levels + 1`` rows), where
+``Δ_max = h_s = max h − min h`` for ``boundary="free"`` (the paper: ``k·h_s/20``) and
+``Δ_max = max h − mean h`` (full contact) for ``boundary="periodic"``. Row ``k = 0`` is the
+undeformed state (the flat just touches the highest point; ``p = 0``).
+
+Columns (lengths ``L`` in the surface's unit, pressures in the unit of ``E``)
+------------------------------------------------------------------------------
+=====================  ================================================================  =====
+column                 definition                                                        unit
+=====================  ================================================================  =====
+``k``                  level index
+``approach``           imposed approach ``Δ``                                            L
+``approach_star``      ``Δ* = Δ/h_s``
+``n_contact``          ``#(p > 0)``
+``contact_fraction``   ``a = #(p > 0)/N``
+``contact_area``       ``A = #(p > 0)·dx²``                                              L²
+``load``               ``F = dx² Σ p``                                                   E·L²
+``mean_pressure``      ``p̄ = F/A0``, ``A0 = N·dx²``                                      E
+``free_volume``        ``V = dx² Σ g``, gap ``g = max h − Δ − h + u``                    L³
+``free_volume_star``   ``V* = V/(A0·σ)``, ``σ = √m0`` of the undeformed surface
+``mean_gap``           ``ḡ = V/A0``                                                      L
+``mean_gap_star``      ``ḡ* = ḡ/ḡ(Δ = 0)``
+``V_pg``               percolating volume for the chosen ``axis``                        L³
+``V_pg_star``          ``V_pg* = V_pg/V_pg(Δ = 0)`` (chosen ``axis``)
+``V_pg_axis0``         volume of the free clusters spanning axis 0 (first to last row)   L³
+``V_dead_axis0``       clusters touching the boundary without spanning axis 0            L³
+``V_trapped_axis0``    clusters touching no boundary                                     L³
+``n_spanning_axis0``   number of clusters spanning axis 0
+``…_axis1``            the same for flow along axis 1 (first to last column)
+``m0 m2 m4 alpha``     Nayak's moments of the deformed surface ``s = h − u``             L², 1,
+                       (:func:`leakpath.moments.nayak_moments`, finite differences)      L⁻², 1
+``m0_star`` …          each divided by its value for the undeformed surface
+``solver``             the solver that ran (``"auto"``: ``polonsky-keer+active-set``)
+``iterations``         solver iterations (summed over restarts)
+``kkt_restarts``       exact re-solves from the returned contact set needed to reach the
+                       KKT acceptance threshold :data:`KKT_ACCEPT` (normally 0)
+``kkt``                KKT certificate of the accepted solution, relative to ``h_s``
+``Q K K_star``         leak rate, permeability and ``K/K(Δ = 0)`` along ``flow_axis``     L³, L³,
+                       (:mod:`leakpath.leakage`; NaN with ``flow=False``)                1
+=====================  ================================================================  =====
+
+``V = V_pg + V_dead + V_trapped`` for each axis (to round-off). Wall-clock ``seconds`` per
+level are kept in :attr:`SweepResult.seconds` and in the JSON metadata, not in the CSV: the
+CSV holds only numbers that a rerun reproduces bit for bit.
+
+Warm starts and reproducibility
+-------------------------------
+``warm_start=True`` starts level ``k`` from the *contact mask* of level ``k − 1`` (passed as
+``warm_start=mask`` to :meth:`leakpath.contact.ContactProblem.solve`, which rebuilds its
+factor from that set). The numbers of level ``k`` are then a deterministic function of the
+surface, ``Δ_k`` and the previous mask, so a sweep resumed from a checkpoint (which stores
+the masks) produces a byte-identical CSV. ``warm_start=False`` solves every level from
+``p = 0`` ("without warm starting", as in the paper). The Polonsky–Keer solver is always
+started cold in a sweep (it would need the previous pressure field, not a mask).
+
+Checkpoints
+-----------
+With ``checkpoint_dir``, a ``manifest.json`` records what the sweep is (surface hash,
+approaches, solver options); each finished level is written atomically as
+``level_KKKK.json`` (its row, its wall time, its contact mask and percolation class map, both
+compressed) and, with ``keep_fields``, ``level_KKKK.npz`` (pressure, gap, labels). Rerunning
+the same sweep with the same ``checkpoint_dir`` loads the finished levels instead of solving
+them again; a different sweep in that directory is refused (``ValueError``).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import sys
+import time
+import warnings
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from . import _validate, leakage  # leakage: leak-rate columns Q, K, K_star
+from ._checkpoint import CHECKPOINT_FORMAT, CheckpointMismatch, _Checkpoint, _Level
+from ._core import __version__
+from ._table import COLUMNS, CSV_COLUMNS, SweepResult, _finish_row, surface_sha256
+from .contact import AUTO_ACTIVE_SET_MAX_POINTS, SOLVERS, ContactProblem, ContactState
+from .errors import InvalidArgumentError, NotConvergedError
+from .moments import nayak_moments
+from .surfaces import Surface
+
+if TYPE_CHECKING:  # pragma: no cover
+    from ._percolation import Percolation
+    from .surface import Surface
+
+__all__ = ["sweep", "SweepResult", "CheckpointMismatch", "COLUMNS", "CSV_COLUMNS", "KKT_ACCEPT"]
+
+PathLike = str | os.PathLike[str]
+
+#: Largest KKT certificate (relative to ``h_s``) a sweep accepts from a solve. A larger one
+#: triggers an exact re-solve warm-started from the returned contact set; if that does not
+#: reach it either, the sweep raises ``RuntimeError``.
+KKT_ACCEPT = 1e-8
+
+#: Axes accepted by ``axis`` (``docs/conventions.md``).
+AXES: tuple[Any, ...] = (0, 1, "either", "both")
+
+
+def _check_levels(levels: Any, shape: tuple[int, int], keep_fields: bool) -> int:
+    n = _validate.integer("levels", levels, low=1, high=2**1024, what="an integer ≥ 1")
+    # Each level keeps its row (~16 KiB with its approach), its packed contact mask and
+    # class map (≤ 2 bytes per point compressed) and, with keep_fields, pressure, gap and
+    # labels twice over (20 bytes per point, stacked at the end): refuse before solving.
+    points = shape[0] * shape[1]
+    per_level = 16 * 1024 + 2 * points + (40 * points if keep_fields else 0)
+    limit = _validate.memory_budget()
+    if (n + 1) * per_level > limit:
+        raise _validate.too_large(
+            "levels",
+            f"a sweep of {n} levels on {shape[0]} × {shape[1]} points",
+            (n + 1) * per_level,
+            limit,
+            f"use at most {max(limit // per_level - 1, 1)} levels",
+        )
+    return n
+
+
+def _resolve_approaches(problem: ContactProblem, levels: int, approaches: Any) -> list[float]:
+    limit = problem.max_approach
+    if approaches is None:
+        return [float(limit * k / levels) for k in range(levels + 1)]
+    arr = _validate.real_array("approaches", approaches, ndim=1, finite=False)
+    if arr.size == 0:
+        raise InvalidArgumentError("approaches: must be a non-empty 1-D sequence of numbers")
+    if not np.all(np.isfinite(arr)):
+        raise InvalidArgumentError("approaches: every value must be finite")
+    if np.any(arr < 0):
+        raise InvalidArgumentError(f"approaches: must be ≥ 0, got min {arr.min()!r}")
+    if np.any(np.diff(arr) <= 0):
+        raise InvalidArgumentError("approaches: must be strictly increasing")
+    if problem.boundary == "periodic" and arr[-1] > limit * (1 + 1e-12):
+        raise InvalidArgumentError(
+            f"approaches: {arr[-1]!r} exceeds full contact of a periodic surface, "
+            f"max h − mean h = {limit!r}; give approaches ≤ that"
+        )
+    return [float(a) for a in arr]
+
+
+def _resolve_mean_pressures(mean_pressures: Any) -> list[float]:
+    arr = _validate.real_array("mean_pressures", mean_pressures, ndim=1, finite=False)
+    if arr.size == 0:
+        raise InvalidArgumentError("mean_pressures: must be a non-empty 1-D sequence of numbers")
+    if not (np.all(np.isfinite(arr)) and np.all(arr > 0)):
+        raise InvalidArgumentError("mean_pressures: every value must be finite and > 0")
+    if np.any(np.diff(arr) <= 0):
+        raise InvalidArgumentError("mean_pressures: must be strictly increasing")
+    return [float(v) for v in arr]
+
+
+def _check_axis(axis: Any) -> Any:
+    return _validate.axis(axis)
+
+
+def _check_connectivity(connectivity: Any) -> int:
+    return _validate.connectivity(connectivity)
+
+
+# ---------------------------------------------------------------------------- one level
+def _solve_accepted(
+    problem: ContactProblem,
+    level: tuple[str, float],
+    solver: str,
+    warm: bool | np.ndarray,
+) -> tuple[ContactState, int, int]:
+    """Solve one level (``("approach", Δ)`` or ``("mean_pressure", p̄)``), and re-solve
+    exactly from the returned contact set while ``kkt > KKT_ACCEPT``.
+
+    Returns the state, the iterations summed over the solves and the number of re-solves.
+    """
+    kind, value = level
+    state = problem.solve(**{kind: value}, solver=solver, warm_start=warm)  # type: ignore[arg-type]
+    approach = state.approach
+    iterations = state.iterations
+    restarts = 0
+    while not (state.kkt <= KKT_ACCEPT):
+        if restarts >= 2:
+            raise NotConvergedError(
+                f"solver: {solver!r} did not reach the KKT threshold {KKT_ACCEPT:g} at "
+                f"approach {approach!r} (certificate {state.kkt:.3g} after {restarts} "
+                "exact restarts); check the surface's units, or try solver='active-set'",
+                solver=solver,
+                iterations=iterations,
+                residual=state.kkt,
+            )
+        restart_solver = "active-set" if solver in ("polonsky-keer", "auto") else solver
+        state = problem.solve(approach, solver=restart_solver, warm_start=state.contact)  # type: ignore[arg-type]
+        iterations += state.iterations
+        restarts += 1
+    return state, iterations, restarts
+
+
+def _warm_start_for(
+    done: Sequence[_Level], level_list: Sequence[tuple[str, float]], k: int, shape: Any
+) -> np.ndarray:
+    """Start of level ``k`` from the levels before it.
+
+    With pressure fields (Polonsky–Keer): the linear extrapolation of the last two in the
+    imposed value ``v`` (approach or mean pressure), clipped at 0,
+    ``p = max(p₁ + (v_k − v₁)/(v₁ − v₀)·(p₁ − p₀), 0)`` — measured on the paper's sweep it
+    saves about a fifth of the iterations over starting from ``p₁`` alone. Otherwise the
+    previous contact mask (exact solvers). Only recorded fields enter, so a resumed sweep
+    starts each level exactly as an uninterrupted one.
+    """
+    last = done[-1]
+    if last.pressure is None:
+        return last.contact_mask(shape)
+    p1 = last.pressure
+    if len(done) < 2 or done[-2].pressure is None or k < 2:
+        return p1
+    v0, v1, vk = level_list[k - 2][1], level_list[k - 1][1], level_list[k][1]
+    if not (v1 > v0 and v0 > 0):  # the Δ = 0 level carries no information on the slope
+        return p1
+    p0 = done[-2].pressure
+    return np.maximum(p1 + (vk - v1) / (v1 - v0) * (p1 - p0), 0.0)
+
+
+def _percolation_columns(perc: Percolation, suffix: str) -> dict[str, Any]:
+    return {
+        f"V_pg{suffix}": float(perc.spanning_volume),
+        f"V_dead{suffix}": float(perc.dead_end_volume),
+        f"V_trapped{suffix}": float(perc.trapped_volume),
+        f"n_spanning{suffix}": int(perc.n_spanning),
+    }
+
+
+def _analyse(
+    k: int,
+    state: ContactState,
+    *,
+    iterations: int,
+    restarts: int,
+    axis: Any,
+    connectivity: int,
+    keep_fields: bool,
+    t_start: float,
+    keep_pressure: bool = False,
+    flow_axis: int = 0,
+    flow_on: bool = False,
+) -> _Level:
+    """Row, masks and fields of a solved level (``t_start``: when its solve began)."""
+    p0 = state.percolation(axis=0, connectivity=connectivity)
+    p1 = state.percolation(axis=1, connectivity=connectivity)
+    pa = state.percolation(axis=axis, connectivity=connectivity)
+    mom = nayak_moments(state.deformed, state.dx)
+    n_contact = int(np.count_nonzero(state.contact))
+    row: dict[str, Any] = {
+        "k": k,
+        "approach": float(state.approach),
+        "n_contact": n_contact,
+        "contact_fraction": state.contact_fraction,
+        "contact_area": state.contact_area,
+        "load": state.load,
+        "mean_pressure": state.mean_pressure,
+        "free_volume": state.free_volume,
+        "mean_gap": state.mean_gap,
+        "V_pg": float(pa.spanning_volume),
+        **_percolation_columns(p0, "_axis0"),
+        **_percolation_columns(p1, "_axis1"),
+        "m0": mom.m0,
+        "m2": mom.m2,
+        "m4": mom.m4,
+        "alpha": mom.alpha,
+        "solver": state.solver,
+        "iterations": int(iterations),
+        "kkt_restarts": int(restarts),
+        "kkt": float(state.kkt),
+    }
+    row.update(leakage.flow_columns(state, flow_axis, flow_on))  # Q, K (leakpath.leakage)
+    classes = np.asarray(pa.class_map(), dtype=np.int8)
+    fields = None
+    if keep_fields:
+        fields = {
+            "pressure": np.array(state.pressure, dtype=np.float64),
+            "gap": np.array(state.gap, dtype=np.float64),
+            "labels": np.asarray(pa.labels, dtype=np.int32),
+        }
+    return _Level(
+        row=row,
+        seconds=time.perf_counter() - t_start,
+        mask=np.packbits(state.contact.ravel()),
+        classes=classes,
+        fields=fields,
+        pressure=np.array(state.pressure, dtype="<f8") if keep_pressure else None,
+    )
+
+
+# ---------------------------------------------------------------------------- checkpoints
+
+def sweep(
+    surface: Surface,
+    *,
+    levels: int = 20,
+    approaches: Sequence[float] | np.ndarray | None = None,
+    mean_pressures: Sequence[float] | np.ndarray | None = None,
+    solver: str = "auto",
+    warm_start: bool = True,
+    axis: int | str = 0,
+    connectivity: int = 4,
+    E: float = 1.0,  # noqa: N803 - Young's modulus
+    nu: float = 0.0,
+    boundary: str = "free",
+    keep_fields: bool = False,
+    progress: bool = False,
+    checkpoint_dir: PathLike | None = None,
+    flow: bool | None = None,
+    flow_axis: int | None = None,
+) -> SweepResult:
+    """Solve the contact of ``surface`` at increasing approaches and tabulate each level.
+
+    Parameters
+    ----------
+    surface : Surface
+        The undeformed rough surface (heights and ``dx`` in one length unit).
+    levels : int
+        Number of equal steps: ``Δ_k = k·Δ_max/levels``, ``k = 0 … levels``, with
+        ``Δ_max = h_s`` (free) or ``max h − mean h`` (periodic). Ignored with ``approaches``.
+    approaches : sequence of float, optional
+        Explicit approaches [length]: strictly increasing, ``≥ 0`` (periodic: ``≤`` full
+        contact, :attr:`ContactProblem.max_approach`).
+    mean_pressures : sequence of float, optional
+        Load control instead: strictly increasing mean pressures ``p̄ = F/A0 > 0`` [E's
+        unit], one row each; the approach of each row is then the solver's output. The seal
+        engineer's curve against nominal pressure (``mean_pressure_star = p̄/E*``).
+    solver : str
+        ``"auto"`` (default: Polonsky–Keer above a few thousand points, the exact active set
+        below; see :meth:`ContactProblem.solve`), ``"polonsky-keer"``, ``"active-set"`` or
+        ``"lawson-hanson"`` (the paper's one-point-per-iteration algorithm).
+    warm_start : bool
+        Start level ``k`` from level ``k − 1`` (default: Polonsky–Keer from its pressure
+        field, the exact solvers from its contact set), or every level from ``p = 0``
+        (``False``, the paper's "without warm starting").
+    axis : 0, 1, "either" or "both"
+        Flow direction for ``V_pg``/``V_pg_star`` and the maps (both axes are always
+        tabulated in ``*_axis0``/``*_axis1``).
+    connectivity : 4 or 8
+        Neighbourhood of free cells in a cluster.
+    E, nu : float
+        Young's modulus and Poisson's ratio, ``E* = E/(1 − ν²)`` (pressures in E's unit).
+    boundary : "free" or "periodic"
+        Elastic boundary condition (``docs/conventions.md``).
+    keep_fields : bool
+        Keep pressure, gap and cluster labels of every level (:meth:`SweepResult.save_fields`).
+    progress : bool
+        Show a tqdm progress bar (one step per level) on stderr.
+    checkpoint_dir : path, optional
+        Write each finished level there and reuse the levels found there (module docstring).
+    flow : bool, optional
+        Leak-rate columns ``Q``, ``K``, ``K_star`` (:mod:`leakpath.leakage`): ``True``,
+        ``False`` (NaN columns), or ``None`` (default: on up to 513² points).
+    flow_axis : 0 or 1, optional
+        Direction of the leak (default: ``axis`` when it is 0 or 1, else 0).
+
+    Returns
+    -------
+    SweepResult
+
+    Raises
+    ------
+    ValueError
+        A bad argument (the message names it) or a checkpoint of a different sweep.
+    RuntimeError
+        A solve that does not reach the KKT threshold :data:`KKT_ACCEPT`.
+    """
+    if not isinstance(surface, Surface):
+        raise InvalidArgumentError(
+            f"surface: expected a leakpath Surface, got {type(surface).__name__}"
+        )
+    if min(surface.shape) < 3:
+        raise InvalidArgumentError(
+            f"surface: needs at least 3 points per axis, got {surface.shape}"
+        )
+    if not surface.height_range > 0:
+        raise InvalidArgumentError(
+            "surface: flat (h_s = max h − min h = 0): the flat touches every point at once "
+            "and there is no approach to sweep; check the heights (units, a constant file)"
+        )
+    _validate.choice("solver", solver, SOLVERS)
+    warm_start = _validate.flag("warm_start", warm_start)
+    keep_fields = _validate.flag("keep_fields", keep_fields)
+    n_levels = _check_levels(levels, surface.shape, keep_fields)
+    axis = _check_axis(axis)
+    connectivity = _check_connectivity(connectivity)
+    flow_on = leakage.flow_enabled(flow, surface.shape)  # leakpath.leakage
+    flow_axis = leakage.flow_axis_for(flow_axis, axis)
+    problem = ContactProblem(surface, E=E, nu=nu, boundary=boundary)  # type: ignore[arg-type]
+    if approaches is not None and mean_pressures is not None:
+        raise InvalidArgumentError(
+            "mean_pressures: give approaches= or mean_pressures=, not both",
+            argument="mean_pressures",
+        )
+    if mean_pressures is not None:
+        pressure_list = _resolve_mean_pressures(mean_pressures)
+        level_list = [("mean_pressure", v) for v in pressure_list]
+        approach_list = None
+    else:
+        approach_list = _resolve_approaches(problem, n_levels, approaches)
+        level_list = [("approach", v) for v in approach_list]
+        pressure_list = None
+    run_solver = solver
+    # Polonsky–Keer warm-starts from the previous pressure field, which checkpoints keep.
+    uses_pk = solver == "polonsky-keer" or (
+        solver == "auto" and surface.heights.size > AUTO_ACTIVE_SET_MAX_POINTS
+    )
+    keep_pressure = bool(warm_start) and (uses_pk or mean_pressures is not None)
+    t_total = time.perf_counter()
+
+    parameters: dict[str, Any] = {
+        "levels": (
+            len(approach_list) - 1
+            if approach_list is not None and approaches is None
+            else None
+        ),
+        "approaches": approach_list,
+        "mean_pressures": pressure_list,
+        "solver": solver,
+        "warm_start": bool(warm_start),
+        "axis": axis,
+        "connectivity": connectivity,
+        "E": float(E),
+        "nu": float(nu),
+        "e_star": problem.e_star,
+        "boundary": boundary,
+        "kkt_accept": KKT_ACCEPT,
+        "keep_fields": bool(keep_fields),
+        "flow": flow_on,  # leakpath.leakage
+        "flow_axis": flow_axis,
+    }
+
+    # Undeformed reference (Δ = 0: p = 0, u = 0, the whole interface is free).
+    ref_state = problem.solve(0.0, solver=run_solver, warm_start=False)  # type: ignore[arg-type]
+    ref_mom = nayak_moments(surface.heights, surface.dx)
+    reference = {
+        "h_s": surface.height_range,
+        "e_star": problem.e_star,
+        "A0": surface.nominal_area,
+        "sigma": math.sqrt(ref_mom.m0),
+        "free_volume": ref_state.free_volume,
+        "mean_gap": ref_state.mean_gap,
+        "V_pg": float(ref_state.percolation(axis=axis, connectivity=connectivity).spanning_volume),
+        "m0": ref_mom.m0,
+        "m2": ref_mom.m2,
+        "m4": ref_mom.m4,
+        "alpha": ref_mom.alpha,
+        "K": leakage.reference_permeability(ref_state, flow_axis, flow_on),  # leakage
+    }
+
+    checkpoint = None
+    if checkpoint_dir is not None:
+        identity = {k: v for k, v in parameters.items() if k not in ("keep_fields",)}
+        manifest = {
+            "format": CHECKPOINT_FORMAT,
+            "leakpath_version": __version__,
+            "surface_sha256": surface_sha256(surface),
+            "shape": list(surface.shape),
+            "parameters": identity,
+        }
+        checkpoint = _Checkpoint(checkpoint_dir, manifest, keep_fields)
+
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(
+            total=len(level_list), desc="sweep", unit="level", file=sys.stderr, leave=False
+        )
+    shape = surface.shape
+    done: list[_Level] = []
+    resumed: list[int] = []
+    try:
+        for k, target in enumerate(level_list):
+            level = None
+            if checkpoint is not None:
+                level = checkpoint.load(k, shape, need_pressure=keep_pressure)
+            if level is not None:
+                resumed.append(k)
+            else:
+                warm: bool | np.ndarray = False
+                if warm_start and done:
+                    warm = _warm_start_for(done, level_list, k, shape)
+                t0 = time.perf_counter()
+                state, iterations, restarts = _solve_accepted(problem, target, run_solver, warm)
+                level = _analyse(
+                    k,
+                    state,
+                    iterations=iterations,
+                    restarts=restarts,
+                    axis=axis,
+                    connectivity=connectivity,
+                    keep_fields=keep_fields,
+                    t_start=t0,
+                    keep_pressure=keep_pressure,
+                    flow_axis=flow_axis,  # leakpath.leakage
+                    flow_on=flow_on,
+                )
+                if checkpoint is not None:
+                    checkpoint.save(k, level, shape)
+            done.append(level)
+            if len(done) > 2:
+                done[-3].pressure = None  # a warm start needs only the last two fields
+            if bar is not None:
+                bar.update(1)
+                bar.set_postfix(contact=f"{level.row['contact_fraction']:.3f}")
+    finally:
+        if bar is not None:
+            bar.close()
+
+    rows = [_finish_row(lv.row, reference, surface.nominal_area) for lv in done]
+    fields = None
+    if keep_fields:
+        fields = {
+            name: np.stack([lv.fields[name] for lv in done])  # type: ignore[index]
+            for name in ("pressure", "gap", "labels")
+        }
+    if checkpoint is not None and checkpoint.recomputed:
+        warnings.warn(
+            "checkpoint_dir: recomputed "
+            + "; ".join(f"level {k} ({why})" for k, why in checkpoint.recomputed)
+            + " — their records failed the integrity check and were not used",
+            stacklevel=2,
+        )
+    return SweepResult(
+        rows=rows,
+        parameters=parameters,
+        surface=surface,
+        reference=reference,
+        seconds=[lv.seconds for lv in done],
+        resumed=resumed,
+        recomputed=[k for k, _ in checkpoint.recomputed] if checkpoint is not None else [],
+        fields=fields,
+        total_seconds=time.perf_counter() - t_total,
+        _masks=[lv.mask for lv in done],
+        _classes=[lv.classes for lv in done],
+    )
+
