@@ -580,7 +580,9 @@ class TestCLI:
         def boom(*args, **kwargs):
             raise OverflowError("math range error")
 
-        monkeypatch.setattr(cli, "rmd", boom)
+        from leakpath.cli import _surface
+
+        monkeypatch.setattr(_surface, "rmd", boom)
         argv = ["surface", "rmd", "--m", "3", "--D", "2.2", "--seed", "0"]
         rc = cli.main([*argv, "--out", str(tmp_path / "a.npz")])
         err = capsys.readouterr().err

@@ -18,12 +18,12 @@ from __future__ import annotations
 
 import math
 import numbers
-import os
 import sys
 from typing import Any
 
 import numpy as np
 
+from . import _memory
 from .errors import InvalidArgumentError, ProblemTooLargeError
 
 __all__ = [
@@ -366,12 +366,10 @@ def contact_scales(e_star: float, dx: float, height_range: float, name: str = "E
 
 # ---------------------------------------------------------------------------- memory
 def memory_budget() -> int:
-    """Bytes leakpath may use by default: 70 % of physical memory (8 GiB if unknown)."""
-    try:
-        total = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
-    except (ValueError, OSError, AttributeError):  # pragma: no cover - non-POSIX
-        total = 8 << 30
-    return int(0.7 * total)
+    """Bytes leakpath may use by default: the one default of every memory limit,
+    :func:`leakpath._memory.memory_limit` (headroom under cgroup, rlimits and available
+    memory, or 70 % of physical memory where none is known)."""
+    return _memory.memory_limit()
 
 
 def memory_limit(value: Any, name: str = "memory_limit") -> int | None:
