@@ -154,7 +154,7 @@ def _coerce_cell(name: str, value: Any) -> Any:
 
 
 # ---------------------------------------------------------------------------- result
-@dataclass(eq=False)
+@dataclass(frozen=True, eq=False)
 class SweepResult:
     """The table of a sweep, its parameters and the surface it was run on.
 

@@ -85,7 +85,7 @@ def contact_modulus(E: float, nu: float) -> float:
     return e_star
 
 
-@dataclass(eq=False)
+@dataclass(frozen=True, eq=False)
 class ContactState:
     """The solved contact at one imposed approach.
 
