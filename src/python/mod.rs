@@ -12,8 +12,8 @@ use pyo3::exceptions::{PyKeyboardInterrupt, PyRuntimeError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
+use crate::elastic::kernel as influence;
 use crate::error::Error;
-use crate::influence;
 
 /// Maps a core error to the matching `leakpath.errors` exception, with its structured fields
 /// (`argument`; `estimate`, `limit`, `what`; `solver`, `iterations`, `residual`).
@@ -496,10 +496,10 @@ mod contact_py {
 
     use super::{check_positive, to_py};
     use crate::alloc;
+    use crate::contact::lawson_hanson::{Factor, LawsonHanson, Options, Pivoting, Start};
+    use crate::elastic::kernel::Kernel;
+    use crate::elastic::operator::{Boundary, Operator};
     use crate::error::Error;
-    use crate::influence::Kernel;
-    use crate::nnls::{Factor, LawsonHanson, Options, Pivoting, Start};
-    use crate::operator::{Boundary, Operator};
 
     fn field<'py>(
         py: Python<'py>,
@@ -790,9 +790,9 @@ mod pk_py {
 
     use super::{row_major, to_py};
     use crate::alloc;
+    use crate::contact::polonsky_keer::{self as pk, Control, Options, Problem};
+    use crate::elastic::operator::Boundary;
     use crate::error::Error;
-    use crate::operator::Boundary;
-    use crate::pk::{self, Control, Options, Problem};
 
     fn invalid(name: &'static str, msg: String) -> PyErr {
         to_py(Error::invalid(name, msg))

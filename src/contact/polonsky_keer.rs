@@ -126,9 +126,9 @@ use std::time::{Duration, Instant};
 use rayon::prelude::*;
 
 use crate::alloc;
+use crate::elastic::kernel::{love_displacement, Kernel};
+use crate::elastic::operator::{check_shape, padded, smooth_size, Boundary, Operator};
 use crate::error::{Error, Result};
-use crate::influence::{love_displacement, Kernel};
-use crate::operator::{check_shape, padded, smooth_size, Boundary, Operator};
 
 /// Default KKT tolerance, relative to the height range.
 pub const DEFAULT_TOL: f64 = 1e-12;
@@ -1480,7 +1480,7 @@ fn run(op: &Operator, problem: &Problem, control: Control, opts: &Options) -> Re
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::operator::dense_apply;
+    use crate::elastic::operator::dense_apply;
     use std::f64::consts::PI;
 
     fn lcg(seed: u64, n: usize) -> Vec<f64> {

@@ -22,8 +22,8 @@ use rustfft::num_complex::Complex64;
 use rustfft::{Fft, FftPlanner};
 
 use crate::alloc;
+use crate::elastic::kernel::Kernel;
 use crate::error::{Error, Result};
-use crate::influence::Kernel;
 
 /// Columns handled per rayon task in the fused column pass.
 const COLUMN_BLOCK: usize = 8;

@@ -38,9 +38,9 @@ use faer::{Accum, Mat, MatMut, MatRef, Par};
 use rayon::prelude::*;
 
 use crate::alloc;
+use crate::elastic::kernel::Kernel;
+use crate::elastic::operator::Operator;
 use crate::error::{Error, Result};
-use crate::influence::Kernel;
-use crate::operator::Operator;
 
 const NOT_IN_P: usize = usize::MAX;
 
@@ -578,8 +578,8 @@ impl<'a> LawsonHanson<'a> {
         // Contact needs u_i = b_i ≥ 0 (free boundary: u ≥ 0), so the passive set never
         // exceeds the overlap count; periodic u can be negative, so no bound there.
         let k_bound = match self.op.boundary {
-            crate::operator::Boundary::Free => b.iter().filter(|&&v| v >= 0.0).count(),
-            crate::operator::Boundary::Periodic => n,
+            crate::elastic::operator::Boundary::Free => b.iter().filter(|&&v| v >= 0.0).count(),
+            crate::elastic::operator::Boundary::Periodic => n,
         };
         let mut p: Vec<f64> = alloc::try_zeroed(n, "the pressure field")?;
         let mut u: Vec<f64> = alloc::try_zeroed(n, "the displacement field")?;
@@ -772,7 +772,7 @@ impl<'a> LawsonHanson<'a> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::operator::Operator;
+    use crate::elastic::operator::Operator;
 
     fn lcg(seed: u64, n: usize) -> Vec<f64> {
         let mut s = seed;
