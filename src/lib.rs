@@ -10,6 +10,7 @@ pub mod contact;
 pub mod elastic;
 pub mod error;
 pub mod flow;
+pub mod grid;
 
 #[cfg(feature = "python")]
 mod python;

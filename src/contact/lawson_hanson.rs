@@ -578,8 +578,8 @@ impl<'a> LawsonHanson<'a> {
         // Contact needs u_i = b_i ≥ 0 (free boundary: u ≥ 0), so the passive set never
         // exceeds the overlap count; periodic u can be negative, so no bound there.
         let k_bound = match self.op.boundary {
-            crate::elastic::operator::Boundary::Free => b.iter().filter(|&&v| v >= 0.0).count(),
-            crate::elastic::operator::Boundary::Periodic => n,
+            crate::grid::Boundary::Free => b.iter().filter(|&&v| v >= 0.0).count(),
+            crate::grid::Boundary::Periodic => n,
         };
         let mut p: Vec<f64> = alloc::try_zeroed(n, "the pressure field")?;
         let mut u: Vec<f64> = alloc::try_zeroed(n, "the displacement field")?;

@@ -127,8 +127,9 @@ use rayon::prelude::*;
 
 use crate::alloc;
 use crate::elastic::kernel::{love_displacement, Kernel};
-use crate::elastic::operator::{check_shape, padded, smooth_size, Boundary, Operator};
+use crate::elastic::operator::Operator;
 use crate::error::{Error, Result};
+use crate::grid::{check_shape, padded, smooth_size, Boundary};
 
 /// Default KKT tolerance, relative to the height range.
 pub const DEFAULT_TOL: f64 = 1e-12;

@@ -23,34 +23,11 @@ use rustfft::{Fft, FftPlanner};
 
 use crate::alloc;
 use crate::elastic::kernel::Kernel;
-use crate::error::{Error, Result};
+use crate::error::Result;
+use crate::grid::{padded, smooth_size, Boundary};
 
 /// Columns handled per rayon task in the fused column pass.
 const COLUMN_BLOCK: usize = 8;
-
-/// Smallest 2,3,5-smooth integer `≥ n`.
-pub fn smooth_size(n: usize) -> usize {
-    let mut m = n.max(1);
-    loop {
-        let mut r = m;
-        for p in [2, 3, 5] {
-            while r % p == 0 {
-                r /= p;
-            }
-        }
-        if r == 1 {
-            return m;
-        }
-        m += 1;
-    }
-}
-
-/// Boundary condition of the elastic problem.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Boundary {
-    Free,
-    Periodic,
-}
 
 /// `u = C p` by FFT for an `ny × nx` grid.
 pub struct Operator {
@@ -354,28 +331,6 @@ struct SyncPtr(*mut Complex64);
 // SAFETY: used only to hand disjoint columns of one buffer to rayon tasks.
 unsafe impl Send for SyncPtr {}
 unsafe impl Sync for SyncPtr {}
-
-/// Transform sizes for a grid.
-pub fn padded(ny: usize, nx: usize, boundary: Boundary) -> (usize, usize) {
-    match boundary {
-        Boundary::Free => (
-            smooth_size(ny.saturating_mul(2) - 1),
-            smooth_size(nx.saturating_mul(2) - 1),
-        ),
-        Boundary::Periodic => (ny, nx),
-    }
-}
-
-/// Validate a grid shape for the operators.
-pub fn check_shape(ny: usize, nx: usize) -> Result<()> {
-    if ny == 0 || nx == 0 {
-        return Err(Error::invalid(
-            "heights",
-            "the grid must have at least one point",
-        ));
-    }
-    Ok(())
-}
 
 /// Dense reference product `u = C p` from the kernel table (O(N²); tests only).
 pub fn dense_apply(kernel: &Kernel, p: &[f64]) -> Vec<f64> {

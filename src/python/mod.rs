@@ -498,8 +498,9 @@ mod contact_py {
     use crate::alloc;
     use crate::contact::lawson_hanson::{Factor, LawsonHanson, Options, Pivoting, Start};
     use crate::elastic::kernel::Kernel;
-    use crate::elastic::operator::{Boundary, Operator};
+    use crate::elastic::operator::Operator;
     use crate::error::Error;
+    use crate::grid::Boundary;
 
     fn field<'py>(
         py: Python<'py>,
@@ -791,8 +792,8 @@ mod pk_py {
     use super::{row_major, to_py};
     use crate::alloc;
     use crate::contact::polonsky_keer::{self as pk, Control, Options, Problem};
-    use crate::elastic::operator::Boundary;
     use crate::error::Error;
+    use crate::grid::Boundary;
 
     fn invalid(name: &'static str, msg: String) -> PyErr {
         to_py(Error::invalid(name, msg))
