@@ -38,6 +38,7 @@ use faer::{Accum, Mat, MatMut, MatRef, Par};
 use rayon::prelude::*;
 
 use crate::alloc;
+use crate::contact::kkt::kkt_certificate;
 use crate::elastic::kernel::Kernel;
 use crate::elastic::operator::Operator;
 use crate::error::{Error, Result};
@@ -498,32 +499,6 @@ pub struct Solution {
     pub iterations: usize,
     pub kkt: f64,
     pub n_contact: usize,
-}
-
-/// The KKT certificate `max(−min g, max_{p>0} |g|, Σ p|g| / Σ p) / h_s`.
-pub fn kkt_certificate(p: &[f64], g: &[f64], h_range: f64) -> f64 {
-    let (neg, on_contact, sp, spg) = p
-        .par_chunks(4096)
-        .zip(g.par_chunks(4096))
-        .map(|(pc, gc)| {
-            let mut a = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
-            for (&pi, &gi) in pc.iter().zip(gc) {
-                a.0 = a.0.max(-gi);
-                if pi > 0.0 {
-                    a.1 = a.1.max(gi.abs());
-                    a.2 += pi;
-                    a.3 += pi * gi.abs();
-                }
-            }
-            a
-        })
-        .collect::<Vec<_>>()
-        .into_iter()
-        .fold((0.0f64, 0.0f64, 0.0f64, 0.0f64), |a, b| {
-            (a.0.max(b.0), a.1.max(b.1), a.2 + b.2, a.3 + b.3)
-        });
-    let ratio = if sp > 0.0 { spg / sp } else { 0.0 };
-    neg.max(on_contact).max(ratio) / h_range
 }
 
 /// `(max h, h_s)` of a height field.

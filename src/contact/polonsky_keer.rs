@@ -304,23 +304,6 @@ pub fn memory_estimate(ny: usize, nx: usize, boundary: Boundary) -> u64 {
     n.saturating_mul(8).saturating_add(build.max(iterate))
 }
 
-/// KKT certificate of a state, relative to `scale` (see the module documentation).
-/// Sums in the solver's fixed chunk order, so it reproduces [`Solution::kkt`] bit for bit.
-pub fn kkt_certificate(pressure: &[f64], gap: &[f64], scale: f64) -> f64 {
-    let parts: Vec<Acc> = pressure
-        .par_chunks(CHUNK)
-        .zip(gap.par_chunks(CHUNK))
-        .map(|(pc, gc)| {
-            let mut a = Acc::ZERO;
-            for (&p, &g) in pc.iter().zip(gc) {
-                a.observe(p, g);
-            }
-            a
-        })
-        .collect();
-    combine(&parts).certificate() / scale
-}
-
 /// Solve on a new operator built for `problem` (free: Love kernel, zero-padded FFT; periodic:
 /// spectral stiffness).
 pub fn solve(problem: &Problem, control: Control, opts: &Options) -> Result<Solution> {
@@ -1481,6 +1464,7 @@ fn run(op: &Operator, problem: &Problem, control: Control, opts: &Options) -> Re
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::contact::kkt::kkt_certificate;
     use crate::elastic::operator::dense_apply;
     use std::f64::consts::PI;
 
