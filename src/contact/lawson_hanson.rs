@@ -40,6 +40,7 @@ use rayon::prelude::*;
 use crate::alloc;
 use crate::contact::kkt::kkt_certificate;
 use crate::elastic::kernel::Kernel;
+use crate::elastic::memory;
 use crate::elastic::operator::Operator;
 use crate::error::{Error, Result};
 
@@ -135,11 +136,6 @@ impl Factor {
         self.pos[i] != NOT_IN_P
     }
 
-    /// Bytes of a factor for `k` passive points.
-    pub fn bytes_for(k: usize) -> u64 {
-        (k as u64) * (k as u64) * 8
-    }
-
     fn lower(&self, k: usize) -> MatRef<'_, f64> {
         if k == 0 {
             return MatRef::from_row_major_slice_with_stride(&[], 0, 0, 1);
@@ -153,7 +149,7 @@ impl Factor {
         }
         let grown = (self.cap + self.cap / 2).max(k).max(64).min(k_bound.max(k));
         // While growing, the old factor is copied into the new one: both are held at once.
-        let need = Self::bytes_for(grown) + Self::bytes_for(self.cap);
+        let need = memory::dense_factor_growth(grown, self.cap);
         let what = format!(
             "growing the Cholesky factor of the contact block to {grown} rows for {k} contact \
              points (a {grown}² new factor while the {}² old one is copied into it; \
@@ -198,10 +194,7 @@ impl Factor {
             return Ok(());
         }
         self.reserve(k + nb, k_bound)?;
-        // Working set of the update besides the factor: R (k × nb), S and its kept copy
-        // (nb × nb each) and the Cholesky scratch (about one more nb × nb).
-        let work = 8 * (k as u64 * nb as u64 + 3 * nb as u64 * nb as u64);
-        let need = Self::bytes_for(self.cap).saturating_add(work);
+        let need = memory::dense_factor_update(self.cap, k, nb);
         if need > self.memory_limit {
             return Err(Error::TooLarge {
                 bytes: need,

@@ -2,4 +2,5 @@
 //! FFT operators that apply it to a pressure field.
 
 pub mod kernel;
+pub mod memory;
 pub mod operator;

@@ -51,27 +51,6 @@ pub struct Operator {
 }
 
 impl Operator {
-    /// Bytes held by an operator for an `ny × nx` grid, and the transient peak of building it.
-    /// Saturates at `u64::MAX` for sizes no machine holds.
-    pub fn memory_estimate(ny: usize, nx: usize, boundary: Boundary) -> u64 {
-        let (py, px) = padded(ny, nx, boundary);
-        let (py, px, ny) = (py as u64, px as u64, ny as u64);
-        let pxh = px / 2 + 1;
-        let spec = py.saturating_mul(pxh).saturating_mul(8);
-        // One apply: the ny × pxh half spectrum, allocated with the plans and kept.
-        let apply = ny.saturating_mul(pxh).saturating_mul(16);
-        // Building the free kernel spectrum: the padded kernel and its half spectrum, then
-        // that half spectrum and the spectrum.
-        let build = match boundary {
-            Boundary::Free => py
-                .saturating_mul(pxh)
-                .saturating_mul(16)
-                .saturating_add(py.saturating_mul(px).saturating_mul(8).max(spec)),
-            Boundary::Periodic => spec,
-        };
-        apply.saturating_add(build.max(spec))
-    }
-
     /// The free-boundary operator for a Love kernel table; `Error::TooLarge` when its buffers
     /// cannot be allocated.
     pub fn try_free(kernel: &Kernel) -> Result<Self> {

@@ -498,6 +498,7 @@ mod contact_py {
     use crate::alloc;
     use crate::contact::lawson_hanson::{Factor, LawsonHanson, Options, Pivoting, Start};
     use crate::elastic::kernel::Kernel;
+    use crate::elastic::memory;
     use crate::elastic::operator::Operator;
     use crate::error::Error;
     use crate::grid::Boundary;
@@ -578,8 +579,7 @@ mod contact_py {
             let [ny, nx] = [heights.shape()[0], heights.shape()[1]];
             // Kernel table, heights, the solvers' fields (p, u, g, b, …) and the FFT operator
             // with the transient peak of building it.
-            let need = Operator::memory_estimate(ny, nx, bc)
-                .saturating_add((ny as u64).saturating_mul(nx as u64).saturating_mul(64));
+            let need = memory::contact_problem(ny, nx, bc);
             if need > memory_limit {
                 return Err(to_py(Error::TooLarge {
                     bytes: need,
@@ -792,6 +792,7 @@ mod pk_py {
     use super::{row_major, to_py};
     use crate::alloc;
     use crate::contact::polonsky_keer::{self as pk, Control, Options, Problem};
+    use crate::elastic::memory;
     use crate::error::Error;
     use crate::grid::Boundary;
 
@@ -867,7 +868,7 @@ mod pk_py {
             None => super::default_memory_limit(py)?,
         };
         // Refuse before copying anything (the estimate includes the copy of the heights).
-        let need = pk::memory_estimate(ny, nx, boundary);
+        let need = memory::polonsky_keer(ny, nx, boundary);
         if need > memory_limit {
             let kind = match boundary {
                 Boundary::Free => "free",
