@@ -491,7 +491,8 @@ pub struct Solution {
     pub approach: f64,
     pub iterations: usize,
     pub kkt: f64,
-    pub n_contact: usize,
+    /// Number of points with `p > 0`.
+    pub contact_points: usize,
 }
 
 /// `(max h, h_s)` of a height field.
@@ -724,7 +725,7 @@ impl<'a> LawsonHanson<'a> {
         let mut gap: Vec<f64> = alloc::try_with_capacity(n, "the gap field")?;
         gap.extend((0..n).map(|i| u[i] - b[i]));
         let kkt = kkt_certificate(&p, &gap, scale);
-        let n_contact = p.iter().filter(|&&v| v > 0.0).count();
+        let contact_points = p.iter().filter(|&&v| v > 0.0).count();
         Ok(Solution {
             pressure: p,
             displacement: u,
@@ -732,7 +733,7 @@ impl<'a> LawsonHanson<'a> {
             approach,
             iterations,
             kkt,
-            n_contact,
+            contact_points,
         })
     }
 }

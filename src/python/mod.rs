@@ -485,7 +485,6 @@ mod clusters_py {
 // A surface on an elastic half-space: kernel table, FFT operator and the Lawson–Hanson factor,
 // kept across solves so a sweep can warm-start (core: influence.rs, operator.rs, nnls.rs).
 mod contact_py {
-    use std::sync::Arc;
 
     use numpy::{
         PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2,
@@ -496,10 +495,7 @@ mod contact_py {
 
     use super::{check_positive, to_py};
     use crate::alloc;
-    use crate::contact::lawson_hanson::{Factor, LawsonHanson, Options, Pivoting, Start};
-    use crate::elastic::kernel::Kernel;
-    use crate::elastic::memory;
-    use crate::elastic::operator::Operator;
+    use crate::contact::{ContactProblem as Problem, Control, SolveOptions, Solver, Start};
     use crate::error::Error;
     use crate::grid::Boundary;
 
@@ -547,14 +543,8 @@ mod contact_py {
     /// An elastic rough surface against a rigid flat, ready to be solved at many approaches.
     #[pyclass(name = "ContactProblem", module = "leakpath._core")]
     pub(super) struct ContactProblem {
-        kernel: Arc<Kernel>,
-        /// Shared with the Polonsky–Keer binding, which reuses it across solves.
-        pub(super) op: Arc<Operator>,
-        h: Arc<Vec<f64>>,
-        /// `None` while a solve runs, and after an interrupted one (whose worker may still
-        /// hold it): the next solve then starts a fresh factor.
-        factor: Option<Factor>,
-        memory_limit: u64,
+        /// Kernel, operator, heights, factor and last pressure (core: contact/problem.rs).
+        pub(super) inner: Problem,
     }
 
     #[pymethods]
@@ -577,56 +567,23 @@ mod contact_py {
                 None => super::default_memory_limit(py)?,
             };
             let [ny, nx] = [heights.shape()[0], heights.shape()[1]];
-            // Kernel table, heights, the solvers' fields (p, u, g, b, …) and the FFT operator
-            // with the transient peak of building it.
-            let need = memory::contact_problem(ny, nx, bc);
-            if need > memory_limit {
-                return Err(to_py(Error::TooLarge {
-                    bytes: need,
-                    limit: memory_limit,
-                    what: format!(
-                        "the contact problem of a {ny} × {nx} grid (kernel table, FFT operator \
-                         and solution fields)"
-                    ),
-                }));
-            }
+            // Refuse before copying anything.
+            Problem::check_memory(ny, nx, bc, memory_limit).map_err(to_py)?;
             let (h, ny, nx) = heights_vec(&heights)?;
             // Building the kernel and the operator of a large grid takes seconds and cannot
             // stop half-way: the owned variant lets Ctrl-C return at once.
-            let built = super::interruptible_owned(py, move |_| -> Result<_, Error> {
-                Ok(match bc {
-                    Boundary::Free => {
-                        let kernel = Kernel::try_new(ny, nx, dx, e_star)?;
-                        let op = Operator::try_free(&kernel)?;
-                        (kernel, op)
-                    }
-                    Boundary::Periodic => {
-                        // The periodic C_PP blocks come from the circulant's first column.
-                        let op = Operator::try_periodic(ny, nx, dx, e_star)?;
-                        let mut unit: Vec<f64> = alloc::try_zeroed(ny * nx, "a unit load")?;
-                        unit[0] = 1.0;
-                        let mut column: Vec<f64> =
-                            alloc::try_zeroed(ny * nx, "the periodic kernel table")?;
-                        op.apply(&unit, &mut column);
-                        (Kernel::from_table(ny, nx, dx, e_star, column), op)
-                    }
-                })
+            let built = super::interruptible_owned(py, move |_| {
+                Problem::try_new(h, ny, nx, dx, e_star, bc, memory_limit)
             })?;
-            let (kernel, op) = built.map_err(to_py)?;
-            let n = h.len();
             Ok(ContactProblem {
-                kernel: Arc::new(kernel),
-                op: Arc::new(op),
-                h: Arc::new(h),
-                factor: Some(Factor::try_new(n, memory_limit).map_err(to_py)?),
-                memory_limit,
+                inner: built.map_err(to_py)?,
             })
         }
 
         /// Number of points in the passive (contact) set kept from the last solve.
         #[getter]
         fn n_passive(&self) -> usize {
-            self.factor.as_ref().map_or(0, Factor::len)
+            self.inner.n_passive()
         }
 
         /// u = C p by FFT (shape (ny, nx)).
@@ -635,8 +592,9 @@ mod contact_py {
             py: Python<'py>,
             pressure: PyReadonlyArray2<'_, f64>,
         ) -> PyResult<Bound<'py, PyArray2<f64>>> {
+            let op = self.inner.operator();
             let a = pressure.as_array();
-            if a.dim() != (self.op.ny, self.op.nx) {
+            if a.dim() != (op.ny, op.nx) {
                 return Err(to_py(Error::invalid(
                     "pressure",
                     "shape differs from the surface",
@@ -644,8 +602,8 @@ mod contact_py {
             }
             let p: Vec<f64> = a.iter().copied().collect();
             let mut u = vec![0.0; p.len()];
-            py.detach(|| self.op.apply(&p, &mut u));
-            field(py, u, self.op.ny, self.op.nx)
+            py.detach(|| op.apply(&p, &mut u));
+            field(py, u, op.ny, op.nx)
         }
 
         /// The dense block C_PP (k × k) for flat indices (Love or periodic coefficients).
@@ -654,7 +612,7 @@ mod contact_py {
             py: Python<'py>,
             indices: PyReadonlyArray1<'_, i64>,
         ) -> PyResult<Bound<'py, PyArray2<f64>>> {
-            let n = self.h.len() as i64;
+            let n = (self.inner.ny() * self.inner.nx()) as i64;
             let idx: Vec<usize> = indices
                 .as_array()
                 .iter()
@@ -670,35 +628,87 @@ mod contact_py {
                 })
                 .collect::<PyResult<_>>()?;
             let k = idx.len();
-            let b = py.detach(|| self.kernel.block(&idx)).map_err(to_py)?;
+            let kernel = self.inner.kernel();
+            let b = py.detach(|| kernel.block(&idx)).map_err(to_py)?;
             // Column-major and symmetric: the same numbers read row-major.
             PyArray1::from_vec(py, b).reshape([k, k])
         }
 
-        /// Lawson–Hanson solve at `approach`. `start`: "cold" (p = 0, the paper), "previous"
-        /// (the passive set of the last solve) or "set" with `contact_set` (flat indices).
-        #[pyo3(signature = (approach, start="cold", contact_set=None, tol=1e-11, max_iter=None, block=false))]
+        /// The solver that `solver` runs on this grid under the given control (the `auto`
+        /// policy).
+        #[pyo3(signature = (solver="auto", load_control=false))]
+        fn resolve_solver(&self, solver: &str, load_control: bool) -> PyResult<&'static str> {
+            let control = if load_control {
+                Control::MeanPressure(1.0)
+            } else {
+                Control::Approach(0.0)
+            };
+            let n = self.inner.ny() * self.inner.nx();
+            Ok(Solver::from_name(solver)
+                .and_then(|s| s.resolve(n, control))
+                .map_err(to_py)?
+                .name())
+        }
+
+        /// Solve at `approach` or at `mean_pressure` (exactly one) with `solver` ("auto",
+        /// "polonsky-keer", "active-set", "lawson-hanson"). `start`: "cold" (p = 0), "previous"
+        /// (this problem's last solve), "pressure" with `initial_pressure` or "set" with
+        /// `contact_set` (flat indices).
+        #[pyo3(signature = (
+            approach=None, mean_pressure=None, solver="auto", start="cold",
+            initial_pressure=None, contact_set=None, tol=1e-12, max_iter=None
+        ))]
         #[allow(clippy::too_many_arguments)]
-        fn solve_lawson_hanson<'py>(
+        fn solve<'py>(
             &mut self,
             py: Python<'py>,
-            approach: f64,
+            approach: Option<f64>,
+            mean_pressure: Option<f64>,
+            solver: &str,
             start: &str,
+            initial_pressure: Option<PyReadonlyArray2<'_, f64>>,
             contact_set: Option<PyReadonlyArray1<'_, i64>>,
             tol: f64,
             max_iter: Option<usize>,
-            block: bool,
         ) -> PyResult<Bound<'py, PyDict>> {
-            if !(approach.is_finite() && approach >= 0.0) {
-                return Err(to_py(Error::invalid(
-                    "approach",
-                    format!("must be ≥ 0, got {approach}"),
-                )));
-            }
+            let control = match (approach, mean_pressure) {
+                (Some(d), None) => Control::Approach(d),
+                (None, Some(m)) => Control::MeanPressure(m),
+                _ => {
+                    return Err(to_py(Error::invalid(
+                        "approach",
+                        "give exactly one of approach= (displacement control) and \
+                         mean_pressure= (load control)",
+                    )))
+                }
+            };
+            let solver = Solver::from_name(solver).map_err(to_py)?;
             check_positive("tol", tol)?;
-            let n = self.h.len();
-            let set: Option<Vec<usize>> = match (start, contact_set) {
-                ("set", Some(s)) => Some(
+            let (ny, nx) = (self.inner.ny(), self.inner.nx());
+            let n = ny * nx;
+            enum Owned {
+                Cold,
+                Previous,
+                Pressure(Vec<f64>),
+                Set(Vec<usize>),
+            }
+            let owned = match (start, initial_pressure, contact_set) {
+                ("cold", _, _) => Owned::Cold,
+                ("previous", _, _) => Owned::Previous,
+                ("pressure", Some(p), _) => {
+                    if p.shape() != [ny, nx] {
+                        return Err(to_py(Error::invalid(
+                            "initial_pressure",
+                            format!("must have the shape of the heights ({ny}, {nx})"),
+                        )));
+                    }
+                    let src = super::row_major(&p);
+                    let mut v = alloc::try_with_capacity(n, "a copy of the initial pressure")
+                        .map_err(to_py)?;
+                    v.extend_from_slice(&src);
+                    Owned::Pressure(v)
+                }
+                ("set", _, Some(s)) => Owned::Set(
                     s.as_array()
                         .iter()
                         .map(|&i| {
@@ -713,66 +723,57 @@ mod contact_py {
                         })
                         .collect::<PyResult<_>>()?,
                 ),
-                ("set", None) => {
+                ("pressure", None, _) => {
+                    return Err(to_py(Error::invalid(
+                        "warm_start",
+                        "start='pressure' needs initial_pressure",
+                    )))
+                }
+                ("set", _, None) => {
                     return Err(to_py(Error::invalid(
                         "warm_start",
                         "start='set' needs contact_set",
                     )))
                 }
-                ("cold" | "previous", _) => None,
-                (other, _) => {
+                (other, _, _) => {
                     return Err(to_py(Error::invalid(
                         "start",
-                        format!("must be 'cold', 'previous' or 'set', got {other:?}"),
+                        format!("must be 'cold', 'previous', 'pressure' or 'set', got {other:?}"),
                     )))
                 }
             };
-            let opts = Options {
-                tol,
-                max_iter: max_iter.unwrap_or(50 * n + 1000),
-                pivoting: if block {
-                    Pivoting::Block
-                } else {
-                    Pivoting::Single
-                },
-                memory_limit: 0,
-            };
-            let start_kind = start.to_string();
             let t0 = std::time::Instant::now();
-            let (ny, nx) = (self.op.ny, self.op.nx);
-            let mut factor = match self.factor.take() {
-                Some(f) => f,
-                None => Factor::try_new(n, self.memory_limit).map_err(to_py)?,
-            };
-            let (kernel, op, h) = (
-                Arc::clone(&self.kernel),
-                Arc::clone(&self.op),
-                Arc::clone(&self.h),
-            );
-            let (result, factor) = super::interruptible_owned(py, move |stop| {
+            let mut work = self.inner.detach();
+            let (result, work) = super::interruptible_owned(py, move |stop| {
                 let should_stop = super::stop_flag(stop);
-                let start = match (start_kind.as_str(), &set) {
-                    ("previous", _) => Start::Previous,
-                    (_, Some(s)) => Start::Set(s),
-                    _ => Start::Cold,
+                let start = match &owned {
+                    Owned::Cold => Start::Cold,
+                    Owned::Previous => Start::Previous,
+                    Owned::Pressure(p) => Start::Pressure(p),
+                    Owned::Set(s) => Start::ContactSet(s),
                 };
-                let mut lh = LawsonHanson::new(&kernel, &op, &h, &mut factor);
-                let result = super::on_solver_pool(ny * nx, || {
-                    lh.solve(approach, start, &opts, &should_stop)
-                });
-                (result, factor)
+                let opts = SolveOptions {
+                    tol,
+                    max_iter,
+                    should_stop: Some(&should_stop),
+                };
+                let result = super::on_solver_pool(n, || work.solve(control, solver, start, &opts));
+                (result, work)
             })?;
-            self.factor = Some(factor);
+            self.inner.attach(work);
             let sol = result.map_err(to_py)?;
             let seconds = t0.elapsed().as_secs_f64();
             let d = PyDict::new(py);
+            d.set_item("solver", sol.solver.name())?;
             d.set_item("pressure", field(py, sol.pressure, ny, nx)?)?;
             d.set_item("displacement", field(py, sol.displacement, ny, nx)?)?;
             d.set_item("gap", field(py, sol.gap, ny, nx)?)?;
             d.set_item("approach", sol.approach)?;
             d.set_item("iterations", sol.iterations)?;
+            d.set_item("applies", sol.applies)?;
+            d.set_item("preconditioner_applies", sol.preconditioner_applies)?;
             d.set_item("kkt", sol.kkt)?;
-            d.set_item("n_contact", sol.n_contact)?;
+            d.set_item("contact_points", sol.contact_points)?;
             d.set_item("seconds", seconds)?;
             Ok(d)
         }
@@ -826,7 +827,9 @@ mod pk_py {
         precondition: bool,
         operator_of: Option<PyRef<'py, super::contact_py::ContactProblem>>,
     ) -> PyResult<Bound<'py, PyDict>> {
-        let op = operator_of.as_ref().map(|cp| std::sync::Arc::clone(&cp.op));
+        let op = operator_of
+            .as_ref()
+            .map(|cp| std::sync::Arc::clone(cp.inner.operator()));
         let [ny, nx] = [heights.shape()[0], heights.shape()[1]];
         let control = match (approach, mean_pressure) {
             (Some(d), None) => Control::Approach(d),
@@ -1057,6 +1060,10 @@ fn core_module(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add_function(wrap_pyfunction!(kernel_table, m)?)?;
     m.add_class::<contact_py::ContactProblem>()?;
+    m.add(
+        "AUTO_ACTIVE_SET_MAX_POINTS",
+        crate::contact::AUTO_ACTIVE_SET_MAX_POINTS,
+    )?;
     m.add_function(wrap_pyfunction!(clusters_py::label_clusters, m)?)?;
     m.add_function(wrap_pyfunction!(clusters_py::classify_clusters, m)?)?;
     m.add_function(wrap_pyfunction!(pk_py::solve_polonsky_keer, m)?)?;
