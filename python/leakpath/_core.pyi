@@ -1,9 +1,88 @@
 """Type stubs for leakpath's compiled Rust core (``leakpath._core``)."""
 
+from typing import Literal as _Literal
+from typing import TypedDict as _TypedDict
+
 import numpy as np
 import numpy.typing as npt
 
 __version__: str
+
+#: ``solver="auto"`` runs the block active set on grids of at most this many points
+#: (displacement control), Polonsky–Keer otherwise.
+AUTO_ACTIVE_SET_MAX_POINTS: int
+
+_F64 = npt.NDArray[np.float64]
+
+class ContactResult(_TypedDict):
+    """One contact solve, whichever solver ran. The same field has the same name in every
+    result: ``contact_points`` is ``#(p > 0)``, ``applies`` the FFT products."""
+
+    solver: _Literal["polonsky-keer", "active-set", "lawson-hanson"]
+    pressure: _F64
+    displacement: _F64
+    gap: _F64
+    approach: float
+    iterations: int
+    applies: int
+    preconditioner_applies: int
+    kkt: float
+    contact_points: int
+    seconds: float
+
+class PolonskyKeerResult(_TypedDict):
+    """:func:`solve_polonsky_keer`: the fields of :class:`ContactResult` (no ``solver``) plus
+    the load."""
+
+    pressure: _F64
+    displacement: _F64
+    gap: _F64
+    approach: float
+    iterations: int
+    applies: int
+    preconditioner_applies: int
+    kkt: float
+    load: float
+    mean_pressure: float
+    contact_points: int
+    seconds: float
+
+class ClusterResult(_TypedDict):
+    """:func:`classify_clusters`."""
+
+    labels: npt.NDArray[np.uint32]
+    n_clusters: int
+    areas: npt.NDArray[np.uint64]
+    volumes: _F64
+    touches: npt.NDArray[np.uint8]
+    classes: npt.NDArray[np.uint8]
+    spanning_volume: float
+    dead_end_volume: float
+    trapped_volume: float
+    free_volume: float
+    spanning_area: int
+    dead_end_area: int
+    trapped_area: int
+    free_area: int
+    n_spanning: int
+    n_dead_end: int
+    n_trapped: int
+
+class FlowResult(_TypedDict):
+    """:func:`solve_reynolds_flow`."""
+
+    pressure: _F64
+    flux_axis0: _F64
+    flux_axis1: _F64
+    flow_rate: float
+    inlet_flow_rate: float
+    conductance: float
+    residual: float
+    conservation: float
+    iterations: int
+    n_unknowns: int
+    levels: int
+    seconds: float
 
 def kernel_table(
     ny: int, nx: int, dx: float, e_star: float, memory_limit: int | None = None
@@ -18,9 +97,6 @@ def kernel_table(
     """
 
 # ---- polonsky-keer ----
-from typing import Any as _Any  # noqa: E402  (kept local so the section stands alone)
-from typing import Literal as _Literal  # noqa: E402
-
 def solve_polonsky_keer(
     heights: npt.NDArray[np.float64],
     dx: float,
@@ -32,7 +108,9 @@ def solve_polonsky_keer(
     max_iter: int | None = None,
     initial_pressure: npt.NDArray[np.float64] | None = None,
     memory_limit: int | None = None,
-) -> dict[str, _Any]:
+    precondition: bool = True,
+    operator_of: ContactProblem | None = None,
+) -> PolonskyKeerResult:
     """Normal contact of an elastic rough surface against a rigid flat, Polonsky–Keer CG.
 
     Finds ``p ≥ 0`` with gap ``g = max(h) − Δ − h + u ≥ 0``, ``p·g = 0``, ``u = C p`` (FFT
@@ -82,23 +160,29 @@ class ContactProblem:
         """Displacement ``u = C p`` by FFT, shape ``(ny, nx)``."""
     def block(self, indices: npt.NDArray[np.int64]) -> npt.NDArray[np.float64]:
         """Dense block ``C_PP`` for flat indices (free-boundary Love coefficients)."""
-    def solve_lawson_hanson(
+    def resolve_solver(self, solver: str = "auto", load_control: bool = False) -> str:
+        """The solver ``solver`` runs on this grid (the ``auto`` policy)."""
+    def solve(
         self,
-        approach: float,
-        start: str = "cold",
+        approach: float | None = None,
+        mean_pressure: float | None = None,
+        solver: _Literal["auto", "polonsky-keer", "active-set", "lawson-hanson"] = "auto",
+        start: _Literal["cold", "previous", "pressure", "set"] = "cold",
+        initial_pressure: npt.NDArray[np.float64] | None = None,
         contact_set: npt.NDArray[np.int64] | None = None,
-        tol: float = 1e-11,
+        tol: float = 1e-12,
         max_iter: int | None = None,
-        block: bool = False,
-    ) -> dict[str, _Any]:
-        """Lawson–Hanson NNLS at ``approach``; ``start`` is ``"cold"`` (p = 0), ``"previous"``
-        or ``"set"`` (with ``contact_set``); ``block=True`` lets blocks of points enter at once.
-        Returns pressure, displacement, gap (2-D), approach, iterations, kkt, n_contact, seconds.
-        """
+    ) -> ContactResult:
+        """Solve at ``approach`` or at ``mean_pressure`` (exactly one; the exact solvers take
+        the approach only). ``start``: ``"cold"`` (p = 0), ``"previous"`` (this problem's
+        last solve: Polonsky–Keer from its pressure, the exact solvers from their kept
+        passive set), ``"pressure"`` with ``initial_pressure`` (the exact solvers start from
+        its support ``p > 0``) or ``"set"`` with ``contact_set`` (flat indices; Polonsky–Keer
+        starts cold). ``"auto"`` runs the block active set on grids of at most
+        :data:`AUTO_ACTIVE_SET_MAX_POINTS` points in displacement control, Polonsky–Keer
+        otherwise; ``solver`` in the result names the one that ran."""
 
 # ---- clusters ----
-from typing import Any as _Any  # noqa: E402, F811  (kept local so the section stands alone)
-
 def label_clusters(
     free: npt.NDArray[np.bool_],
     connectivity: int = 4,
@@ -125,7 +209,7 @@ def classify_clusters(
     periodic_axis1: bool = False,
     flow: str = "0",
     threads: int | None = None,
-) -> dict[str, _Any]:
+) -> ClusterResult:
     """Labels the free region and classifies its clusters for flow along ``flow``.
 
     Free cells are ``~contact`` when a contact mask is given, else ``gap > 0``. ``gap`` must be
@@ -154,7 +238,7 @@ def solve_reynolds_flow(
     max_iter: int | None = None,
     memory_limit: int | None = None,
     solver: _Literal["auto", "cholesky", "multigrid"] = "auto",
-) -> dict[str, _Any]:
+) -> FlowResult:
     """Steady Reynolds flow ``∇·(g³/(12η) ∇p) = 0`` through the gap (docs/flow.md).
 
     Cell-centred finite volumes, harmonic-mean faces, reservoirs at ``pressure_drop`` (inlet,

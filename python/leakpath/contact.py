@@ -42,16 +42,9 @@ SOLVERS = ("lawson-hanson", "active-set", "polonsky-keer", "auto")
 DEFAULT_TOL = 1e-12
 
 #: ``solver="auto"`` uses the exact block active set on grids of at most this many points
-#: and Polonsky–Keer above. Measured from p = 0 at Δ = 0.3/0.6/1.0 h_s on an idle machine
-#: (``benchmarks/auto_policy_bench.py`` → ``benchmarks/results/auto_policy.md``): on 17² the
-#: active set is faster at every approach (0.2–0.4 ms); on 33²–65² it is faster at low
-#: contact by at most 3 ms and 2–2.5× slower at half contact; from 129² on Polonsky–Keer is
-#: faster at every approach, 45× at Δ = 0.6 h_s and hundreds of times at Δ = h_s (the
-#: factor work grows like k³ in the contact points k, Polonsky–Keer like N log N per
-#: iteration). A rule by grid size keeps one solver per grid, which warm-started sweeps need
-#: (pressure fields versus contact sets); a per-solve contact-count model would save at most
-#: a few milliseconds per solve on the small grids.
-AUTO_ACTIVE_SET_MAX_POINTS = 32 * 32
+#: (displacement control) and Polonsky–Keer above. The policy and the measurements behind it
+#: live with the solvers in the Rust core (``src/contact/problem.rs``).
+AUTO_ACTIVE_SET_MAX_POINTS: int = _core.AUTO_ACTIVE_SET_MAX_POINTS
 
 
 def default_memory_limit() -> int:
@@ -331,26 +324,9 @@ class ContactProblem:
                     "'polonsky-keer' with mean_pressure=",
                     argument="solver",
                 )
-            return self._solve_pk(None, pbar, warm_start, tol, max_iter)
+            return self._solve(None, pbar, solver, warm_start, tol, max_iter)
         a = self._check_approach(approach)
-        if solver == "auto":
-            solver = (
-                "active-set" if self._h.size <= AUTO_ACTIVE_SET_MAX_POINTS else "polonsky-keer"
-            )
-        if solver == "polonsky-keer":
-            return self._solve_pk(a, None, warm_start, tol, max_iter)
-        start, contact_set = self._start(warm_start)
-        out = self._core.solve_lawson_hanson(
-            a,
-            start=start,
-            contact_set=contact_set,
-            tol=tol,
-            max_iter=max_iter,
-            block=(solver == "active-set"),
-        )
-        state = self._state(out, solver)
-        self._last = state
-        return state
+        return self._solve(a, None, solver, warm_start, tol, max_iter)
 
     def _check_warm_start(self, warm_start: Any) -> None:
         if warm_start is None or isinstance(warm_start, (bool, np.bool_, ContactState)):
@@ -372,49 +348,38 @@ class ContactProblem:
                 argument="warm_start",
             )
 
-    def _start(self, warm_start: Any) -> tuple[str, np.ndarray | None]:
+    def _start(self, warm_start: Any) -> dict[str, Any]:
+        """The core's start: Polonsky–Keer starts from a pressure field, the exact solvers
+        from its support (the core takes ``p > 0``) or from a contact mask."""
         if warm_start is None or warm_start is False:
-            return "cold", None
+            return {"start": "cold"}
         if warm_start is True:
-            return "previous", None
+            return {"start": "previous"}
         if isinstance(warm_start, ContactState):
-            mask = warm_start.contact
-        else:
-            arr = np.asarray(warm_start)
-            mask = arr if arr.dtype == bool else arr > 0
-        return "set", np.flatnonzero(mask).astype(np.int64)
+            return {"start": "pressure", "initial_pressure": warm_start.pressure}
+        arr = np.asarray(warm_start)
+        if arr.dtype == bool:
+            return {"start": "set", "contact_set": np.flatnonzero(arr).astype(np.int64)}
+        return {"start": "pressure", "initial_pressure": np.ascontiguousarray(arr, np.float64)}
 
-    def _solve_pk(
+    def _solve(
         self,
         a: float | None,
         mean_pressure: float | None,
+        solver: str,
         warm_start: Any,
         tol: float,
         max_iter: int | None,
     ) -> ContactState:
-        init = None
-        if warm_start is True and self._last is not None:
-            init = self._last.pressure
-        elif isinstance(warm_start, ContactState):
-            init = warm_start.pressure
-        elif warm_start is not None and not isinstance(warm_start, (bool, np.bool_)):
-            arr = np.asarray(warm_start)
-            if arr.dtype.kind == "f":
-                init = np.ascontiguousarray(arr, dtype=np.float64)
-        out = _core.solve_polonsky_keer(
-            self._h,
-            self.surface.dx,
-            self.e_star,
-            self.boundary,
+        out = self._core.solve(
             approach=a,
             mean_pressure=mean_pressure,
+            solver=solver,
             tol=tol,
             max_iter=max_iter,
-            initial_pressure=init,
-            memory_limit=self.memory_limit,
-            operator_of=self._core,
+            **self._start(warm_start),
         )
-        state = self._state(out, "polonsky-keer")
+        state = self._state(out, out["solver"])
         self._last = state
         return state
 

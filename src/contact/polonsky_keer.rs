@@ -126,9 +126,11 @@ use std::time::{Duration, Instant};
 use rayon::prelude::*;
 
 use crate::alloc;
+use crate::elastic::kernel::{love_displacement, Kernel};
+use crate::elastic::memory;
+use crate::elastic::operator::Operator;
 use crate::error::{Error, Result};
-use crate::influence::{love_displacement, Kernel};
-use crate::operator::{check_shape, padded, smooth_size, Boundary, Operator};
+use crate::grid::{check_shape, Boundary};
 
 /// Default KKT tolerance, relative to the height range.
 pub const DEFAULT_TOL: f64 = 1e-12;
@@ -202,7 +204,7 @@ pub struct Options<'a> {
     /// Warm start: a pressure field (`ny × nx`, finite; negative values are clipped to 0).
     /// In load control it is rescaled to the imposed load.
     pub initial_pressure: Option<&'a [f64]>,
-    /// Refuse up front with [`Error::TooLarge`] when [`memory_estimate`] exceeds this (bytes).
+    /// Refuse up front with [`Error::TooLarge`] when [`memory::polonsky_keer`] exceeds this (bytes).
     pub memory_limit: Option<u64>,
     /// Polled every ~10 iterations (and at least every 0.25 s); `true` → [`Error::Interrupted`].
     pub should_stop: Option<&'a (dyn Fn() -> bool + Sync)>,
@@ -264,69 +266,13 @@ pub fn default_max_iter(n: usize) -> usize {
     q.max(5000)
 }
 
-/// Peak bytes of [`solve`] on an `ny × nx` grid: the larger of building the operator (free:
-/// kernel table, padded kernel and its half spectrum) and iterating (kernel spectrum, the
-/// operator's half-spectrum buffer, six `N`-vectors `p, u, g, t, r` and the influence table
-/// of the sparse corrections), plus one copy of the heights (the bindings copy non-contiguous
-/// input).
-pub fn memory_estimate(ny: usize, nx: usize, boundary: Boundary) -> u64 {
-    let n = (ny as u64).saturating_mul(nx as u64);
-    let (py, px) = padded(ny, nx, boundary);
-    let (py, px) = (py as u64, px as u64);
-    let pxh = px / 2 + 1;
-    let spec = py.saturating_mul(pxh).saturating_mul(8);
-    let apply = (ny as u64).saturating_mul(pxh).saturating_mul(16);
-    let build = match boundary {
-        // Kernel table and the operator's apply buffer, then the padded real kernel and its
-        // half spectrum together, then the half spectrum with the spectrum.
-        Boundary::Free => {
-            let padded_kernel = py.saturating_mul(px).saturating_mul(8);
-            let half = py.saturating_mul(pxh).saturating_mul(16);
-            n.saturating_mul(8)
-                .saturating_add(apply)
-                .saturating_add(half.saturating_add(padded_kernel.max(spec)))
-        }
-        Boundary::Periodic => spec.saturating_add(apply),
-    };
-    // The preconditioner: its spectrum and apply buffer on the smooth-padded grid, and z.
-    let (qy, qx) = (smooth_size(ny) as u64, smooth_size(nx) as u64);
-    let qxh = qx / 2 + 1;
-    let pre = qy
-        .saturating_mul(qxh)
-        .saturating_mul(8)
-        .saturating_add((ny as u64).saturating_mul(qxh).saturating_mul(16))
-        .saturating_add(n.saturating_mul(8));
-    let iterate = spec
-        .saturating_add(apply)
-        .saturating_add(n.saturating_mul(6 * 8))
-        .saturating_add(pre);
-    n.saturating_mul(8).saturating_add(build.max(iterate))
-}
-
-/// KKT certificate of a state, relative to `scale` (see the module documentation).
-/// Sums in the solver's fixed chunk order, so it reproduces [`Solution::kkt`] bit for bit.
-pub fn kkt_certificate(pressure: &[f64], gap: &[f64], scale: f64) -> f64 {
-    let parts: Vec<Acc> = pressure
-        .par_chunks(CHUNK)
-        .zip(gap.par_chunks(CHUNK))
-        .map(|(pc, gc)| {
-            let mut a = Acc::ZERO;
-            for (&p, &g) in pc.iter().zip(gc) {
-                a.observe(p, g);
-            }
-            a
-        })
-        .collect();
-    combine(&parts).certificate() / scale
-}
-
 /// Solve on a new operator built for `problem` (free: Love kernel, zero-padded FFT; periodic:
 /// spectral stiffness).
 pub fn solve(problem: &Problem, control: Control, opts: &Options) -> Result<Solution> {
     validate(problem, control, opts)?;
     let (ny, nx) = (problem.ny, problem.nx);
     if let Some(limit) = opts.memory_limit {
-        let bytes = memory_estimate(ny, nx, problem.boundary);
+        let bytes = memory::polonsky_keer(ny, nx, problem.boundary);
         if bytes > limit {
             return Err(Error::TooLarge {
                 bytes,
@@ -1480,7 +1426,8 @@ fn run(op: &Operator, problem: &Problem, control: Control, opts: &Options) -> Re
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::operator::dense_apply;
+    use crate::contact::kkt::kkt_certificate;
+    use crate::elastic::operator::dense_apply;
     use std::f64::consts::PI;
 
     fn lcg(seed: u64, n: usize) -> Vec<f64> {
@@ -2051,13 +1998,5 @@ mod tests {
             let e = max_rel(&got, &want);
             assert!(e < 1e-12, "periodic={periodic}: {e}");
         }
-    }
-
-    #[test]
-    fn memory_estimate_4097_free_fits_8_gib() {
-        let b = memory_estimate(4097, 4097, Boundary::Free);
-        assert!(b < 8 << 30, "{b}");
-        assert!(b > 1 << 30);
-        assert!(memory_estimate(4096, 4096, Boundary::Periodic) < b);
     }
 }

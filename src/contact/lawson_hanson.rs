@@ -38,9 +38,11 @@ use faer::{Accum, Mat, MatMut, MatRef, Par};
 use rayon::prelude::*;
 
 use crate::alloc;
+use crate::contact::kkt::kkt_certificate;
+use crate::elastic::kernel::Kernel;
+use crate::elastic::memory;
+use crate::elastic::operator::Operator;
 use crate::error::{Error, Result};
-use crate::influence::Kernel;
-use crate::operator::Operator;
 
 const NOT_IN_P: usize = usize::MAX;
 
@@ -134,11 +136,6 @@ impl Factor {
         self.pos[i] != NOT_IN_P
     }
 
-    /// Bytes of a factor for `k` passive points.
-    pub fn bytes_for(k: usize) -> u64 {
-        (k as u64) * (k as u64) * 8
-    }
-
     fn lower(&self, k: usize) -> MatRef<'_, f64> {
         if k == 0 {
             return MatRef::from_row_major_slice_with_stride(&[], 0, 0, 1);
@@ -152,7 +149,7 @@ impl Factor {
         }
         let grown = (self.cap + self.cap / 2).max(k).max(64).min(k_bound.max(k));
         // While growing, the old factor is copied into the new one: both are held at once.
-        let need = Self::bytes_for(grown) + Self::bytes_for(self.cap);
+        let need = memory::dense_factor_growth(grown, self.cap);
         let what = format!(
             "growing the Cholesky factor of the contact block to {grown} rows for {k} contact \
              points (a {grown}² new factor while the {}² old one is copied into it; \
@@ -197,10 +194,7 @@ impl Factor {
             return Ok(());
         }
         self.reserve(k + nb, k_bound)?;
-        // Working set of the update besides the factor: R (k × nb), S and its kept copy
-        // (nb × nb each) and the Cholesky scratch (about one more nb × nb).
-        let work = 8 * (k as u64 * nb as u64 + 3 * nb as u64 * nb as u64);
-        let need = Self::bytes_for(self.cap).saturating_add(work);
+        let need = memory::dense_factor_update(self.cap, k, nb);
         if need > self.memory_limit {
             return Err(Error::TooLarge {
                 bytes: need,
@@ -497,33 +491,8 @@ pub struct Solution {
     pub approach: f64,
     pub iterations: usize,
     pub kkt: f64,
-    pub n_contact: usize,
-}
-
-/// The KKT certificate `max(−min g, max_{p>0} |g|, Σ p|g| / Σ p) / h_s`.
-pub fn kkt_certificate(p: &[f64], g: &[f64], h_range: f64) -> f64 {
-    let (neg, on_contact, sp, spg) = p
-        .par_chunks(4096)
-        .zip(g.par_chunks(4096))
-        .map(|(pc, gc)| {
-            let mut a = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
-            for (&pi, &gi) in pc.iter().zip(gc) {
-                a.0 = a.0.max(-gi);
-                if pi > 0.0 {
-                    a.1 = a.1.max(gi.abs());
-                    a.2 += pi;
-                    a.3 += pi * gi.abs();
-                }
-            }
-            a
-        })
-        .collect::<Vec<_>>()
-        .into_iter()
-        .fold((0.0f64, 0.0f64, 0.0f64, 0.0f64), |a, b| {
-            (a.0.max(b.0), a.1.max(b.1), a.2 + b.2, a.3 + b.3)
-        });
-    let ratio = if sp > 0.0 { spg / sp } else { 0.0 };
-    neg.max(on_contact).max(ratio) / h_range
+    /// Number of points with `p > 0`.
+    pub contact_points: usize,
 }
 
 /// `(max h, h_s)` of a height field.
@@ -578,8 +547,8 @@ impl<'a> LawsonHanson<'a> {
         // Contact needs u_i = b_i ≥ 0 (free boundary: u ≥ 0), so the passive set never
         // exceeds the overlap count; periodic u can be negative, so no bound there.
         let k_bound = match self.op.boundary {
-            crate::operator::Boundary::Free => b.iter().filter(|&&v| v >= 0.0).count(),
-            crate::operator::Boundary::Periodic => n,
+            crate::grid::Boundary::Free => b.iter().filter(|&&v| v >= 0.0).count(),
+            crate::grid::Boundary::Periodic => n,
         };
         let mut p: Vec<f64> = alloc::try_zeroed(n, "the pressure field")?;
         let mut u: Vec<f64> = alloc::try_zeroed(n, "the displacement field")?;
@@ -756,7 +725,7 @@ impl<'a> LawsonHanson<'a> {
         let mut gap: Vec<f64> = alloc::try_with_capacity(n, "the gap field")?;
         gap.extend((0..n).map(|i| u[i] - b[i]));
         let kkt = kkt_certificate(&p, &gap, scale);
-        let n_contact = p.iter().filter(|&&v| v > 0.0).count();
+        let contact_points = p.iter().filter(|&&v| v > 0.0).count();
         Ok(Solution {
             pressure: p,
             displacement: u,
@@ -764,7 +733,7 @@ impl<'a> LawsonHanson<'a> {
             approach,
             iterations,
             kkt,
-            n_contact,
+            contact_points,
         })
     }
 }
@@ -772,7 +741,7 @@ impl<'a> LawsonHanson<'a> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::operator::Operator;
+    use crate::elastic::operator::Operator;
 
     fn lcg(seed: u64, n: usize) -> Vec<f64> {
         let mut s = seed;

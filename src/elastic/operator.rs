@@ -22,35 +22,12 @@ use rustfft::num_complex::Complex64;
 use rustfft::{Fft, FftPlanner};
 
 use crate::alloc;
-use crate::error::{Error, Result};
-use crate::influence::Kernel;
+use crate::elastic::kernel::Kernel;
+use crate::error::Result;
+use crate::grid::{padded, smooth_size, Boundary};
 
 /// Columns handled per rayon task in the fused column pass.
 const COLUMN_BLOCK: usize = 8;
-
-/// Smallest 2,3,5-smooth integer `≥ n`.
-pub fn smooth_size(n: usize) -> usize {
-    let mut m = n.max(1);
-    loop {
-        let mut r = m;
-        for p in [2, 3, 5] {
-            while r % p == 0 {
-                r /= p;
-            }
-        }
-        if r == 1 {
-            return m;
-        }
-        m += 1;
-    }
-}
-
-/// Boundary condition of the elastic problem.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Boundary {
-    Free,
-    Periodic,
-}
 
 /// `u = C p` by FFT for an `ny × nx` grid.
 pub struct Operator {
@@ -74,27 +51,6 @@ pub struct Operator {
 }
 
 impl Operator {
-    /// Bytes held by an operator for an `ny × nx` grid, and the transient peak of building it.
-    /// Saturates at `u64::MAX` for sizes no machine holds.
-    pub fn memory_estimate(ny: usize, nx: usize, boundary: Boundary) -> u64 {
-        let (py, px) = padded(ny, nx, boundary);
-        let (py, px, ny) = (py as u64, px as u64, ny as u64);
-        let pxh = px / 2 + 1;
-        let spec = py.saturating_mul(pxh).saturating_mul(8);
-        // One apply: the ny × pxh half spectrum, allocated with the plans and kept.
-        let apply = ny.saturating_mul(pxh).saturating_mul(16);
-        // Building the free kernel spectrum: the padded kernel and its half spectrum, then
-        // that half spectrum and the spectrum.
-        let build = match boundary {
-            Boundary::Free => py
-                .saturating_mul(pxh)
-                .saturating_mul(16)
-                .saturating_add(py.saturating_mul(px).saturating_mul(8).max(spec)),
-            Boundary::Periodic => spec,
-        };
-        apply.saturating_add(build.max(spec))
-    }
-
     /// The free-boundary operator for a Love kernel table; `Error::TooLarge` when its buffers
     /// cannot be allocated.
     pub fn try_free(kernel: &Kernel) -> Result<Self> {
@@ -354,28 +310,6 @@ struct SyncPtr(*mut Complex64);
 // SAFETY: used only to hand disjoint columns of one buffer to rayon tasks.
 unsafe impl Send for SyncPtr {}
 unsafe impl Sync for SyncPtr {}
-
-/// Transform sizes for a grid.
-pub fn padded(ny: usize, nx: usize, boundary: Boundary) -> (usize, usize) {
-    match boundary {
-        Boundary::Free => (
-            smooth_size(ny.saturating_mul(2) - 1),
-            smooth_size(nx.saturating_mul(2) - 1),
-        ),
-        Boundary::Periodic => (ny, nx),
-    }
-}
-
-/// Validate a grid shape for the operators.
-pub fn check_shape(ny: usize, nx: usize) -> Result<()> {
-    if ny == 0 || nx == 0 {
-        return Err(Error::invalid(
-            "heights",
-            "the grid must have at least one point",
-        ));
-    }
-    Ok(())
-}
 
 /// Dense reference product `u = C p` from the kernel table (O(N²); tests only).
 pub fn dense_apply(kernel: &Kernel, p: &[f64]) -> Vec<f64> {
