@@ -9,6 +9,7 @@ pub mod clusters;
 pub mod error;
 pub mod flow;
 pub mod influence;
+pub mod multilevel;
 pub mod nnls;
 pub mod operator;
 pub mod pk;

@@ -128,6 +128,7 @@ use rayon::prelude::*;
 use crate::alloc;
 use crate::error::{Error, Result};
 use crate::influence::{love_displacement, Kernel};
+use crate::multilevel::{self, CoarseCost};
 use crate::operator::{check_shape, padded, smooth_size, Boundary, Operator};
 
 /// Default KKT tolerance, relative to the height range.
@@ -209,6 +210,10 @@ pub struct Options<'a> {
     /// Precondition the conjugate directions with the periodic inverse compliance
     /// `E*|q|/2` restricted to the contact set (see the module documentation).
     pub precondition: bool,
+    /// Start a cold solve from the solution on the grid coarsened by two, recursively
+    /// ([`crate::multilevel`]); ignored with a warm start and on grids smaller than
+    /// [`crate::multilevel::COARSE_START_MIN_SIDE`] per side.
+    pub coarse_start: bool,
 }
 
 impl Default for Options<'_> {
@@ -220,6 +225,7 @@ impl Default for Options<'_> {
             memory_limit: None,
             should_stop: None,
             precondition: true,
+            coarse_start: true,
         }
     }
 }
@@ -253,6 +259,9 @@ pub struct Solution {
     pub load: f64,
     /// Mean pressure `p̄ = Σ p / N`.
     pub mean_pressure: f64,
+    /// What the coarse levels of a coarse start cost (zero without one); not included in
+    /// `iterations`, `applies`, `preconditioner_applies`.
+    pub coarse: CoarseCost,
 }
 
 /// Default iteration cap, `max(5000, ⌈100·N^¼⌉)`. CG iterations grow like `√cond(C)`, and
@@ -268,7 +277,7 @@ pub fn default_max_iter(n: usize) -> usize {
 /// kernel table, padded kernel and its half spectrum) and iterating (kernel spectrum, the
 /// operator's half-spectrum buffer, six `N`-vectors `p, u, g, t, r` and the influence table
 /// of the sparse corrections), plus one copy of the heights (the bindings copy non-contiguous
-/// input).
+/// input) and the coarse-start pressure.
 pub fn memory_estimate(ny: usize, nx: usize, boundary: Boundary) -> u64 {
     let n = (ny as u64).saturating_mul(nx as u64);
     let (py, px) = padded(ny, nx, boundary);
@@ -300,7 +309,12 @@ pub fn memory_estimate(ny: usize, nx: usize, boundary: Boundary) -> u64 {
         .saturating_add(apply)
         .saturating_add(n.saturating_mul(6 * 8))
         .saturating_add(pre);
-    n.saturating_mul(8).saturating_add(build.max(iterate))
+    // The coarse-start pressure (prolonged, N values) lives through the fine solve; the
+    // coarse levels themselves run on a quarter of the points before the fine operator is
+    // built (with a caller's operator: below its iterating arrays, 6N values).
+    n.saturating_mul(8)
+        .saturating_add(build.max(iterate))
+        .saturating_add(n.saturating_mul(8))
 }
 
 /// KKT certificate of a state, relative to `scale` (see the module documentation).
@@ -338,13 +352,51 @@ pub fn solve(problem: &Problem, control: Control, opts: &Options) -> Result<Solu
             });
         }
     }
+    // The coarse levels run before the fine operator exists, so their memory is not added
+    // to its.
+    let start = coarse_start(problem, control, opts)?;
     let op = match problem.boundary {
         Boundary::Free => {
             Operator::try_free(&Kernel::try_new(ny, nx, problem.dx, problem.e_star)?)?
         }
         Boundary::Periodic => Operator::try_periodic(ny, nx, problem.dx, problem.e_star)?,
     };
-    run(&op, problem, control, opts)
+    run_from(&op, problem, control, opts, start)
+}
+
+/// The coarse-level start of a cold solve, if [`Options::coarse_start`] asks for one.
+fn coarse_start(
+    problem: &Problem,
+    control: Control,
+    opts: &Options,
+) -> Result<Option<(Vec<f64>, CoarseCost)>> {
+    if multilevel::applies_to(problem.ny, problem.nx, opts) {
+        multilevel::start(problem, control, opts)
+    } else {
+        Ok(None)
+    }
+}
+
+/// [`run`] from a coarse start (if any), reporting its cost.
+fn run_from(
+    op: &Operator,
+    problem: &Problem,
+    control: Control,
+    opts: &Options,
+    start: Option<(Vec<f64>, CoarseCost)>,
+) -> Result<Solution> {
+    match start {
+        Some((p0, cost)) => {
+            let warm = Options {
+                initial_pressure: Some(&p0),
+                ..*opts
+            };
+            let mut sol = run(op, problem, control, &warm)?;
+            sol.coarse = cost;
+            Ok(sol)
+        }
+        None => run(op, problem, control, opts),
+    }
 }
 
 /// Solve with an operator built by the caller (e.g. reused over a sweep of approaches). The
@@ -371,7 +423,8 @@ pub fn solve_with_operator(
             ),
         ));
     }
-    run(op, problem, control, opts)
+    let start = coarse_start(problem, control, opts)?;
+    run_from(op, problem, control, opts, start)
 }
 
 fn boundary_name(b: Boundary) -> &'static str {
@@ -1474,6 +1527,7 @@ fn run(op: &Operator, problem: &Problem, control: Control, opts: &Options) -> Re
         contact_points: state.n_c,
         load: sum_p * problem.dx * problem.dx,
         mean_pressure: sum_p / n as f64,
+        coarse: CoarseCost::default(),
     })
 }
 
