@@ -170,3 +170,35 @@ pub fn prolong(pc: &[f64], cy: usize, cx: usize, ny: usize, nx: usize) -> Result
     });
     Ok(p)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn prolongation_is_exact_for_bilinear_fields() {
+        // Odd sides: the coarse nodes cover the fine patch; a field a + b i + c j + d i j
+        // (fine indices) is reproduced at every fine node.
+        let f = |i: f64, j: f64| 0.5 + 0.25 * i - 0.125 * j + 0.01 * i * j;
+        for &(ny, nx) in &[(9usize, 13usize), (1, 7), (5, 1)] {
+            let (cy, cx) = (coarse_side(ny), coarse_side(nx));
+            let pc: Vec<f64> = (0..cy * cx)
+                .map(|k| f(2.0 * (k / cx) as f64, 2.0 * (k % cx) as f64))
+                .collect();
+            let p = prolong(&pc, cy, cx, ny, nx).unwrap();
+            for i in 0..ny {
+                for j in 0..nx {
+                    let want = f(i as f64, j as f64);
+                    assert!((p[i * nx + j] - want).abs() < 1e-14, "({i}, {j})");
+                }
+            }
+        }
+        // Even sides: the last row and column repeat their coarse neighbour.
+        let (ny, nx) = (4usize, 6usize);
+        let pc: Vec<f64> = (0..2 * 3).map(|k| k as f64).collect();
+        let p = prolong(&pc, 2, 3, ny, nx).unwrap();
+        assert_eq!(p[3 * nx + 5], pc[5]);
+        assert_eq!(p[5], pc[2]);
+        assert_eq!(p[nx + 1], 0.25 * (pc[0] + pc[1] + pc[3] + pc[4]));
+    }
+}

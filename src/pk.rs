@@ -1739,6 +1739,70 @@ mod tests {
     }
 
     #[test]
+    fn coarse_start_and_cold_start_reach_the_same_minimiser() {
+        // Large enough for two coarse levels (97 → 49 → 25 per side).
+        let (ny, nx) = (97usize, 100usize);
+        let h = rough(ny, nx, 13);
+        let (hmax, hmin, hsum) = height_stats(&h);
+        for boundary in [Boundary::Free, Boundary::Periodic] {
+            let pr = problem(&h, ny, nx, boundary);
+            let top = match boundary {
+                Boundary::Free => hmax - hmin,
+                Boundary::Periodic => hmax - hsum / (ny * nx) as f64,
+            };
+            let mut controls: Vec<Control> = [0.1, 0.3, 0.6]
+                .iter()
+                .map(|f| Control::Approach(f * top))
+                .collect();
+            let cold = Options {
+                coarse_start: false,
+                ..opts(1e-12)
+            };
+            let mid = solve(&pr, Control::Approach(0.3 * top), &cold).unwrap();
+            controls.push(Control::MeanPressure(mid.mean_pressure));
+            for control in controls {
+                let a = solve(&pr, control, &opts(1e-12)).unwrap();
+                let b = solve(&pr, control, &cold).unwrap();
+                assert_eq!(b.coarse, CoarseCost::default());
+                // Two levels, or one when nothing touches on the coarsest (its highest node
+                // is lower than the fine summit).
+                let levels = a.coarse.levels;
+                assert!(
+                    (1..=2).contains(&levels),
+                    "{boundary:?} {control:?}: {levels}"
+                );
+                assert!(a.coarse.applies > 0);
+                let ratio = a.coarse.applies_fine_equivalent / a.coarse.applies as f64;
+                assert!(ratio > 0.0 && ratio < 0.26, "{ratio}");
+                let ca: Vec<bool> = a.pressure.iter().map(|&p| p > 0.0).collect();
+                let cb: Vec<bool> = b.pressure.iter().map(|&p| p > 0.0).collect();
+                assert_eq!(ca, cb, "{boundary:?} {control:?}");
+                let e = max_rel(&a.pressure, &b.pressure);
+                assert!(e < 1e-8, "{boundary:?} {control:?}: rel diff {e}");
+                assert!(a.kkt <= 1e-12 && b.kkt <= 1e-12);
+                assert!((a.approach - b.approach).abs() < 1e-9 * (hmax - hmin));
+            }
+        }
+        // A warm start or a small grid skips the coarse levels.
+        let pr = problem(&h, ny, nx, Boundary::Free);
+        let first = solve(&pr, Control::Approach(0.1), &Options::default()).unwrap();
+        let warm = Options {
+            initial_pressure: Some(&first.pressure),
+            ..Options::default()
+        };
+        let s = solve(&pr, Control::Approach(0.2), &warm).unwrap();
+        assert_eq!(s.coarse, CoarseCost::default());
+        let small = rough(40, 70, 3);
+        let s = solve(
+            &problem(&small, 40, 70, Boundary::Free),
+            Control::Approach(0.1),
+            &Options::default(),
+        )
+        .unwrap();
+        assert_eq!(s.coarse.levels, 0);
+    }
+
+    #[test]
     fn matches_dense_exact_solution_periodic() {
         let (ny, nx) = (8usize, 10usize);
         let h = rough(ny, nx, 11);
