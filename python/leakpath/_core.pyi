@@ -32,6 +32,9 @@ def solve_polonsky_keer(
     max_iter: int | None = None,
     initial_pressure: npt.NDArray[np.float64] | None = None,
     memory_limit: int | None = None,
+    precondition: bool = True,
+    operator_of: ContactProblem | None = None,
+    coarse_start: bool = True,
 ) -> dict[str, _Any]:
     """Normal contact of an elastic rough surface against a rigid flat, Polonsky–Keer CG.
 
@@ -53,12 +56,22 @@ def solve_polonsky_keer(
     (load). ``memory_limit`` (bytes, default :func:`leakpath._memory.memory_limit`):
     ``ProblemTooLargeError`` (a ``MemoryError``) up front when the solve would need more, or
     when an allocation fails. The GIL is released; Ctrl-C raises ``KeyboardInterrupt`` within
-    a fraction of a second.
+    a fraction of a second. ``precondition``: FFT-preconditioned conjugate steps (inverse
+    half-space compliance ``E*|q|/2`` on the contact set). ``operator_of``: reuse the operator
+    of a :class:`ContactProblem` of the same grid. ``coarse_start``: a cold solve (no
+    ``initial_pressure``) on a grid of at least 64 points per side starts from the solution on
+    the grid coarsened by two (every other node, ``2·dx``, solved the same way down to fewer
+    than 64 points per side, to KKT ``1e-2``), prolonged bilinearly; the answer is the same
+    minimiser.
 
     Returns a dict: ``pressure``, ``displacement``, ``gap`` (``(ny, nx)`` float64; the gap is
     not clamped), ``approach``, ``iterations`` (CG steps), ``applies`` (FFT convolutions),
-    ``kkt``, ``load`` (``F = dx² Σ p``), ``mean_pressure``, ``contact_points`` (``#(p > 0)``),
-    ``seconds``.
+    ``preconditioner_applies``, ``kkt``, ``load`` (``F = dx² Σ p``), ``mean_pressure``,
+    ``contact_points`` (``#(p > 0)``), ``seconds``, and the cost of the coarse levels (0
+    without a coarse start; not included in the counts above): ``coarse_levels``,
+    ``coarse_iterations``, ``coarse_applies``, ``coarse_preconditioner_applies`` (raw, each
+    on its own grid), ``coarse_applies_fine_equivalent``,
+    ``coarse_preconditioner_fine_equivalent`` (``Σ count · N_level / N``).
     """
 
 class ContactProblem:
