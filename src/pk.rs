@@ -309,9 +309,12 @@ pub fn memory_estimate(ny: usize, nx: usize, boundary: Boundary) -> u64 {
         .saturating_add(apply)
         .saturating_add(n.saturating_mul(6 * 8))
         .saturating_add(pre);
-    // The coarse-start pressure (prolonged, N values) lives through the fine solve; the
-    // coarse levels themselves run on a quarter of the points before the fine operator is
-    // built (with a caller's operator: below its iterating arrays, 6N values).
+    // The coarse-start pressure becomes the iterate `p`. The coarse levels run on a quarter of
+    // the points before the fine operator is built; with a caller's operator they run beside
+    // it, and their peak (a quarter of the iterating arrays and spectra, the coarse solution's
+    // three fields and the prolonged pressure, about 30N bytes) stays below the fine
+    // iteration's (48N bytes and the preconditioner). The extra N values are a margin for the
+    // coarse heights and the allocator.
     n.saturating_mul(8)
         .saturating_add(build.max(iterate))
         .saturating_add(n.saturating_mul(8))
@@ -387,15 +390,12 @@ fn run_from(
 ) -> Result<Solution> {
     match start {
         Some((p0, cost)) => {
-            let warm = Options {
-                initial_pressure: Some(&p0),
-                ..*opts
-            };
-            let mut sol = run(op, problem, control, &warm)?;
+            // The start pressure becomes the iterate (no second N-vector).
+            let mut sol = run(op, problem, control, opts, Some(p0))?;
             sol.coarse = cost;
             Ok(sol)
         }
-        None => run(op, problem, control, opts),
+        None => run(op, problem, control, opts, None),
     }
 }
 
@@ -1222,7 +1222,15 @@ fn height_stats(h: &[f64]) -> (f64, f64, f64) {
     )
 }
 
-fn run(op: &Operator, problem: &Problem, control: Control, opts: &Options) -> Result<Solution> {
+/// The iteration. `start`: an initial pressure (`≥ 0`, `N` values) taken over as the iterate,
+/// used instead of `opts.initial_pressure` (the coarse start; there is no warm start then).
+fn run(
+    op: &Operator,
+    problem: &Problem,
+    control: Control,
+    opts: &Options,
+    start: Option<Vec<f64>>,
+) -> Result<Solution> {
     let (ny, nx) = (problem.ny, problem.nx);
     let n = ny * nx;
     let h = problem.heights;
@@ -1279,7 +1287,10 @@ fn run(op: &Operator, problem: &Problem, control: Control, opts: &Options) -> Re
         op,
         h,
         hmax,
-        p: alloc::try_zeroed(n, "the pressure field")?,
+        p: match start {
+            Some(p0) if p0.len() == n => p0,
+            _ => alloc::try_zeroed(n, "the pressure field")?,
+        },
         u: if u_in_r {
             Vec::new()
         } else {
