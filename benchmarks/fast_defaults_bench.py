@@ -265,7 +265,8 @@ import numpy as np
 import leakpath
 from leakpath import _core
 from leakpath.contact import ContactProblem
-n, frac, pre = int(sys.argv[1]), float(sys.argv[2]), sys.argv[3] == "1"
+n, frac = int(sys.argv[1]), float(sys.argv[2])
+pre, coarse = sys.argv[3] == "1", sys.argv[4] == "1"
 if n == 4097:
     s = leakpath.rmd(12, 2.1, seed=0)
 else:
@@ -281,69 +282,90 @@ t_apply = (time.perf_counter() - t0) / 3
 hs = h.max() - h.min()
 t0 = time.perf_counter()
 out = _core.solve_polonsky_keer(h, 1.0, 1.0, "free", approach=frac * hs, tol=1e-8,
-                                precondition=pre, operator_of=prob._core)
+                                precondition=pre, operator_of=prob._core, coarse_start=coarse)
 dt = time.perf_counter() - t0
 print(json.dumps({
     "seconds": dt, "iterations": out["iterations"], "applies": out["applies"],
     "pre": out["preconditioner_applies"], "contact_fraction": out["contact_points"] / h.size,
     "free_volume": float(out["gap"].sum()), "apply_ms": t_apply * 1e3,
     "peak_MiB": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+    "coarse_levels": out["coarse_levels"], "coarse_applies": out["coarse_applies"],
+    "coarse_equiv": out["coarse_applies_fine_equivalent"],
+    "coarse_pre": out["coarse_preconditioner_applies"],
+    "coarse_pre_equiv": out["coarse_preconditioner_fine_equivalent"],
 }))
 """
 
 
-def run_child(n, frac, pre):
+def run_child(n, frac, pre, coarse=False):
     out = subprocess.run(
-        [sys.executable, "-c", CHILD, str(n), str(frac), "1" if pre else "0"],
+        [sys.executable, "-c", CHILD, str(n), str(frac), "1" if pre else "0",
+         "1" if coarse else "0"],
         capture_output=True, text=True, check=True,
     )
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
-def section_large(sizes) -> list[str]:
+def section_large(sizes, variants=("plain", "pre", "coarse")) -> list[str]:
     lines = ["## Free boundary, large grids, tolerance 1e-8·h_s", ""]
     lines.append(
-        "before = plain Polonsky–Keer (`precondition=False`, the former iteration); after = "
-        "the default (preconditioned). FFT products = operator applications on the padded "
-        "grid; preconditioner = FFT pairs on the unpadded grid (smooth-padded). "
-        "ms/it ÷ apply = time per iteration over the time of one operator application "
-        "(forward + inverse real FFT of the padded grid), same process; an iteration does one "
-        "product C t, plus fresh products C p when many points enter or leave the contact set, "
-        "plus one preconditioner pair. ms/FFT product ÷ apply = the whole solve's time per "
-        "operator application over that cost: what the passes over the grid and the "
-        "preconditioner add to the FFTs."
+        "plain = Polonsky–Keer without preconditioner or coarse start (`precondition=False, "
+        "coarse_start=False`); pre = preconditioned, cold start (`coarse_start=False`, the "
+        "former default); coarse = the default (preconditioned, coarse-to-fine start). FFT "
+        "products = operator applications on the padded fine grid; pairs = preconditioner FFT "
+        "pairs on the unpadded grid (smooth-padded). Coarse levels: raw products / pairs over "
+        "all levels (each on its own, smaller grid) and their fine-grid equivalents "
+        "(Σ count · N_level / N). total = fine products + fine-equivalent coarse products. "
+        "ms/it ÷ apply = the whole solve's time (coarse levels included) per fine iteration "
+        "over the time of one operator application (forward + inverse real FFT of the padded "
+        "grid), same process. A run absent from a row is marked —; FFT-product counts are "
+        "deterministic, timings depend on the machine's load (load average at the row's start)."
     )
     lines.append("")
     lines.append(
-        "| grid | Δ/h_s | before: time, its, FFT products | after: time, its, FFT products, "
-        "preconditioner | FFT products before/after | time before/after | ms/it ÷ apply "
-        "(after) | ms/FFT product ÷ apply (after) | ContactMechanics | speed-up vs CM | contact "
-        "fraction (after / CM) | peak MiB (after) |"
+        "| grid | Δ/h_s | plain: time, its, products | pre: time, its, products, pairs | "
+        "coarse: time, its, products, pairs | coarse levels: products, pairs raw (fine-equiv.) "
+        "| total products (fine-equiv.) | plain ÷ coarse total | pre ÷ coarse total | "
+        "ms/it ÷ apply (pre / coarse) | ContactMechanics | contact fraction (pre / coarse / CM) "
+        "| peak MiB (coarse) | load at start |"
     )
-    lines.append("|---|---|---|---|---|---|---|---|---|---|---|---|")
+    lines.append("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for n in sizes:
         for frac in (0.1, 0.3, 0.6):
-            b = run_child(n, frac, False)
-            a = run_child(n, frac, True)
-            per_it = a["seconds"] / max(a["iterations"], 1) * 1e3 / a["apply_ms"]
-            per_product = a["seconds"] / max(a["applies"], 1) * 1e3 / a["apply_ms"]
-            cm_text, sp, cf = "—", "—", f"{a['contact_fraction']:.6f}"
+            start_load = load()
+            b = run_child(n, frac, False, False) if "plain" in variants else None
+            a = run_child(n, frac, True, False) if "pre" in variants else None
+            c = run_child(n, frac, True, True) if "coarse" in variants else None
+            total = c["applies"] + c["coarse_equiv"] if c else None
+
+            def per_it(r):
+                return r["seconds"] / max(r["iterations"], 1) * 1e3 / r["apply_ms"]
+
+            cm_text, cf_cm = "—", "—"
             if n <= 1025 and have("ContactMechanics"):
                 s = leakpath.spectral(n, 0.9, seed=0, rms_height=1.0)
                 h = np.ascontiguousarray(s.heights)
                 system = cm_free_system(h)
                 t0 = time.perf_counter()
                 contact, _ = cm_free_solve(system, h, frac * (h.max() - h.min()), 1e-8)
-                t_cm = time.perf_counter() - t0
-                cm_text = f"{t_cm:.2f} s"
-                sp = f"**{t_cm / a['seconds']:.1f}×**"
-                cf += f" / {contact.mean():.6f}"
+                cm_text = f"{time.perf_counter() - t0:.2f} s"
+                cf_cm = f"{contact.mean():.6f}"
+            dash = "—"
             row = (
-                f"| {n}² | {frac} | {b['seconds']:.2f} s, {b['iterations']}, {b['applies']} | "
-                f"{a['seconds']:.2f} s, {a['iterations']}, {a['applies']}, {a['pre']} | "
-                f"{b['applies'] / a['applies']:.2f}× | {b['seconds'] / a['seconds']:.2f}× | "
-                f"{per_it:.2f} | {per_product:.2f} | {cm_text} | {sp} | {cf} | "
-                f"{a['peak_MiB']:.0f} |"
+                f"| {n}² | {frac} | "
+                + (f"{b['seconds']:.2f} s, {b['iterations']}, {b['applies']} | " if b else "— | ")
+                + (f"{a['seconds']:.2f} s, {a['iterations']}, {a['applies']}, {a['pre']} | "
+                   if a else "— | ")
+                + (f"{c['seconds']:.2f} s, {c['iterations']}, {c['applies']}, {c['pre']} | "
+                   f"{c['coarse_applies']}, {c['coarse_pre']} ({c['coarse_equiv']:.1f}, "
+                   f"{c['coarse_pre_equiv']:.1f}) | {total:.1f} | " if c else "— | — | — | ")
+                + (f"{b['applies'] / total:.2f}× | " if b and c else "— | ")
+                + (f"{a['applies'] / total:.2f}× | " if a and c else "— | ")
+                + f"{per_it(a) if a else dash:{'.2f' if a else ''}} / "
+                + f"{per_it(c) if c else dash:{'.2f' if c else ''}} | {cm_text} | "
+                + f"{a['contact_fraction'] if a else dash:{'.6f' if a else ''}} / "
+                + f"{c['contact_fraction'] if c else dash:{'.6f' if c else ''}} / {cf_cm} | "
+                + f"{c['peak_MiB'] if c else dash:{'.0f' if c else ''}} | {start_load} |"
             )
             lines.append(row)
             print(row, flush=True)
@@ -374,6 +396,10 @@ def main() -> None:
     ap.add_argument("--only", nargs="*", default=["sweep", "threshold", "large", "ensemble"])
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--sizes", type=int, nargs="*", default=[1025, 4097])
+    ap.add_argument(
+        "--variants", nargs="*", default=["plain", "pre", "coarse"],
+        help="large: which Polonsky–Keer runs (plain, pre, coarse)",
+    )
     args = ap.parse_args()
     parts = ["# Default paths against ContactMechanics", "", f"Machine: {machine()}", ""]
     parts.append(f"Load average at the start: {load()}")
@@ -384,7 +410,7 @@ def main() -> None:
         elif name == "threshold":
             parts += section_threshold()
         elif name == "large":
-            parts += section_large(args.sizes)
+            parts += section_large(args.sizes, args.variants)
         elif name == "ensemble":
             parts += section_ensemble()
     parts.append(f"Load average at the end: {load()}")

@@ -103,6 +103,10 @@ class ContactState:
     #: exact solvers, which work on dense blocks.
     fft_products: int = 0
     preconditioner_products: int = 0
+    #: The coarse-to-fine start of a cold Polonsky–Keer solve: FFT products on the coarse
+    #: grids, each weighted by its grid's share of the fine points (a 2× coarser product
+    #: counts ¼); 0 when there was none.
+    coarse_fft_products: float = 0.0
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -399,6 +403,7 @@ class ContactProblem:
             seconds=float(out["seconds"]),
             fft_products=int(out.get("applies", 0)),
             preconditioner_products=int(out.get("preconditioner_applies", 0)),
+            coarse_fft_products=float(out.get("coarse_applies_fine_equivalent", 0.0)),
         )
 
 

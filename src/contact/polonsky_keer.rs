@@ -125,6 +125,7 @@ use std::time::{Duration, Instant};
 
 use rayon::prelude::*;
 
+use super::multilevel::{self, CoarseCost};
 use crate::alloc;
 use crate::elastic::kernel::{love_displacement, Kernel};
 use crate::elastic::memory;
@@ -211,6 +212,10 @@ pub struct Options<'a> {
     /// Precondition the conjugate directions with the periodic inverse compliance
     /// `E*|q|/2` restricted to the contact set (see the module documentation).
     pub precondition: bool,
+    /// Start a cold solve from the solution on the grid coarsened by two, recursively
+    /// ([`crate::multilevel`]); ignored with a warm start and on grids smaller than
+    /// [`crate::multilevel::COARSE_START_MIN_SIDE`] per side.
+    pub coarse_start: bool,
 }
 
 impl Default for Options<'_> {
@@ -222,6 +227,7 @@ impl Default for Options<'_> {
             memory_limit: None,
             should_stop: None,
             precondition: true,
+            coarse_start: true,
         }
     }
 }
@@ -255,6 +261,9 @@ pub struct Solution {
     pub load: f64,
     /// Mean pressure `p̄ = Σ p / N`.
     pub mean_pressure: f64,
+    /// What the coarse levels of a coarse start cost (zero without one); not included in
+    /// `iterations`, `applies`, `preconditioner_applies`.
+    pub coarse: CoarseCost,
 }
 
 /// Default iteration cap, `max(5000, ⌈100·N^¼⌉)`. CG iterations grow like `√cond(C)`, and
@@ -284,13 +293,48 @@ pub fn solve(problem: &Problem, control: Control, opts: &Options) -> Result<Solu
             });
         }
     }
+    // The coarse levels run before the fine operator exists, so their memory is not added
+    // to its.
+    let start = coarse_start(problem, control, opts)?;
     let op = match problem.boundary {
         Boundary::Free => {
             Operator::try_free(&Kernel::try_new(ny, nx, problem.dx, problem.e_star)?)?
         }
         Boundary::Periodic => Operator::try_periodic(ny, nx, problem.dx, problem.e_star)?,
     };
-    run(&op, problem, control, opts)
+    run_from(&op, problem, control, opts, start)
+}
+
+/// The coarse-level start of a cold solve, if [`Options::coarse_start`] asks for one.
+fn coarse_start(
+    problem: &Problem,
+    control: Control,
+    opts: &Options,
+) -> Result<Option<(Vec<f64>, CoarseCost)>> {
+    if multilevel::applies_to(problem.ny, problem.nx, opts) {
+        multilevel::start(problem, control, opts)
+    } else {
+        Ok(None)
+    }
+}
+
+/// [`run`] from a coarse start (if any), reporting its cost.
+fn run_from(
+    op: &Operator,
+    problem: &Problem,
+    control: Control,
+    opts: &Options,
+    start: Option<(Vec<f64>, CoarseCost)>,
+) -> Result<Solution> {
+    match start {
+        Some((p0, cost)) => {
+            // The start pressure becomes the iterate (no second N-vector).
+            let mut sol = run(op, problem, control, opts, Some(p0))?;
+            sol.coarse = cost;
+            Ok(sol)
+        }
+        None => run(op, problem, control, opts, None),
+    }
 }
 
 /// Solve with an operator built by the caller (e.g. reused over a sweep of approaches). The
@@ -317,7 +361,8 @@ pub fn solve_with_operator(
             ),
         ));
     }
-    run(op, problem, control, opts)
+    let start = coarse_start(problem, control, opts)?;
+    run_from(op, problem, control, opts, start)
 }
 
 fn boundary_name(b: Boundary) -> &'static str {
@@ -1115,7 +1160,15 @@ fn height_stats(h: &[f64]) -> (f64, f64, f64) {
     )
 }
 
-fn run(op: &Operator, problem: &Problem, control: Control, opts: &Options) -> Result<Solution> {
+/// The iteration. `start`: an initial pressure (`≥ 0`, `N` values) taken over as the iterate,
+/// used instead of `opts.initial_pressure` (the coarse start; there is no warm start then).
+fn run(
+    op: &Operator,
+    problem: &Problem,
+    control: Control,
+    opts: &Options,
+    start: Option<Vec<f64>>,
+) -> Result<Solution> {
     let (ny, nx) = (problem.ny, problem.nx);
     let n = ny * nx;
     let h = problem.heights;
@@ -1172,7 +1225,10 @@ fn run(op: &Operator, problem: &Problem, control: Control, opts: &Options) -> Re
         op,
         h,
         hmax,
-        p: alloc::try_zeroed(n, "the pressure field")?,
+        p: match start {
+            Some(p0) if p0.len() == n => p0,
+            _ => alloc::try_zeroed(n, "the pressure field")?,
+        },
         u: if u_in_r {
             Vec::new()
         } else {
@@ -1420,6 +1476,7 @@ fn run(op: &Operator, problem: &Problem, control: Control, opts: &Options) -> Re
         contact_points: state.n_c,
         load: sum_p * problem.dx * problem.dx,
         mean_pressure: sum_p / n as f64,
+        coarse: CoarseCost::default(),
     })
 }
 
@@ -1629,6 +1686,70 @@ mod tests {
             }
         }
         assert!(used > 0, "no preconditioned step was taken");
+    }
+
+    #[test]
+    fn coarse_start_and_cold_start_reach_the_same_minimiser() {
+        // Large enough for two coarse levels (97 → 49 → 25 per side).
+        let (ny, nx) = (97usize, 100usize);
+        let h = rough(ny, nx, 13);
+        let (hmax, hmin, hsum) = height_stats(&h);
+        for boundary in [Boundary::Free, Boundary::Periodic] {
+            let pr = problem(&h, ny, nx, boundary);
+            let top = match boundary {
+                Boundary::Free => hmax - hmin,
+                Boundary::Periodic => hmax - hsum / (ny * nx) as f64,
+            };
+            let mut controls: Vec<Control> = [0.1, 0.3, 0.6]
+                .iter()
+                .map(|f| Control::Approach(f * top))
+                .collect();
+            let cold = Options {
+                coarse_start: false,
+                ..opts(1e-12)
+            };
+            let mid = solve(&pr, Control::Approach(0.3 * top), &cold).unwrap();
+            controls.push(Control::MeanPressure(mid.mean_pressure));
+            for control in controls {
+                let a = solve(&pr, control, &opts(1e-12)).unwrap();
+                let b = solve(&pr, control, &cold).unwrap();
+                assert_eq!(b.coarse, CoarseCost::default());
+                // Two levels, or one when nothing touches on the coarsest (its highest node
+                // is lower than the fine summit).
+                let levels = a.coarse.levels;
+                assert!(
+                    (1..=2).contains(&levels),
+                    "{boundary:?} {control:?}: {levels}"
+                );
+                assert!(a.coarse.applies > 0);
+                let ratio = a.coarse.applies_fine_equivalent / a.coarse.applies as f64;
+                assert!(ratio > 0.0 && ratio < 0.26, "{ratio}");
+                let ca: Vec<bool> = a.pressure.iter().map(|&p| p > 0.0).collect();
+                let cb: Vec<bool> = b.pressure.iter().map(|&p| p > 0.0).collect();
+                assert_eq!(ca, cb, "{boundary:?} {control:?}");
+                let e = max_rel(&a.pressure, &b.pressure);
+                assert!(e < 1e-8, "{boundary:?} {control:?}: rel diff {e}");
+                assert!(a.kkt <= 1e-12 && b.kkt <= 1e-12);
+                assert!((a.approach - b.approach).abs() < 1e-9 * (hmax - hmin));
+            }
+        }
+        // A warm start or a small grid skips the coarse levels.
+        let pr = problem(&h, ny, nx, Boundary::Free);
+        let first = solve(&pr, Control::Approach(0.1), &Options::default()).unwrap();
+        let warm = Options {
+            initial_pressure: Some(&first.pressure),
+            ..Options::default()
+        };
+        let s = solve(&pr, Control::Approach(0.2), &warm).unwrap();
+        assert_eq!(s.coarse, CoarseCost::default());
+        let small = rough(40, 70, 3);
+        let s = solve(
+            &problem(&small, 40, 70, Boundary::Free),
+            Control::Approach(0.1),
+            &Options::default(),
+        )
+        .unwrap();
+        assert_eq!(s.coarse.levels, 0);
     }
 
     #[test]

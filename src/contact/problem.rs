@@ -10,6 +10,7 @@ use std::sync::Arc;
 
 use crate::alloc;
 use crate::contact::lawson_hanson::{self as lh, Factor, LawsonHanson, Pivoting};
+use crate::contact::multilevel::CoarseCost;
 use crate::contact::polonsky_keer as pk;
 use crate::elastic::kernel::Kernel;
 use crate::elastic::memory;
@@ -154,6 +155,8 @@ pub struct ContactSolution {
     pub applies: usize,
     /// Preconditioner applications (Polonsky–Keer; 0 for the exact solvers).
     pub preconditioner_applies: usize,
+    /// The coarse-to-fine start's cost (Polonsky–Keer from a cold start; zero otherwise).
+    pub coarse: CoarseCost,
     /// KKT certificate relative to `h_s` ([`crate::contact::kkt`]).
     pub kkt: f64,
     /// Number of points with `p > 0`.
@@ -372,6 +375,7 @@ impl ContactProblem {
             memory_limit: Some(self.memory_limit),
             should_stop: opts.should_stop,
             precondition: true,
+            coarse_start: true,
         };
         let s = pk::solve_with_operator(&self.op, &problem, control, &pk_opts)?;
         Ok(ContactSolution {
@@ -383,6 +387,7 @@ impl ContactProblem {
             iterations: s.iterations,
             applies: s.applies,
             preconditioner_applies: s.preconditioner_applies,
+            coarse: s.coarse,
             kkt: s.kkt,
             contact_points: s.contact_points,
         })
@@ -452,6 +457,7 @@ impl ContactProblem {
             iterations: s.iterations,
             applies: 0,
             preconditioner_applies: 0,
+            coarse: CoarseCost::default(),
             kkt: s.kkt,
             contact_points: s.contact_points,
         })

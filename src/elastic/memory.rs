@@ -30,7 +30,7 @@ pub fn operator(ny: usize, nx: usize, boundary: Boundary) -> u64 {
 /// kernel table, padded kernel and its half spectrum) and iterating (kernel spectrum, the
 /// operator's half-spectrum buffer, six `N`-vectors `p, u, g, t, r` and the influence table
 /// of the sparse corrections), plus one copy of the heights (the bindings copy non-contiguous
-/// input).
+/// input) and a margin for the coarse-to-fine start.
 pub fn polonsky_keer(ny: usize, nx: usize, boundary: Boundary) -> u64 {
     let n = (ny as u64).saturating_mul(nx as u64);
     let (py, px) = padded(ny, nx, boundary);
@@ -62,7 +62,15 @@ pub fn polonsky_keer(ny: usize, nx: usize, boundary: Boundary) -> u64 {
         .saturating_add(apply)
         .saturating_add(n.saturating_mul(6 * 8))
         .saturating_add(pre);
-    n.saturating_mul(8).saturating_add(build.max(iterate))
+    // The coarse-start pressure becomes the iterate `p`. The coarse levels run on a quarter of
+    // the points before the fine operator is built; with a caller's operator they run beside
+    // it, and their peak (a quarter of the iterating arrays and spectra, the coarse solution's
+    // three fields and the prolonged pressure, about 30N bytes) stays below the fine
+    // iteration's (48N bytes and the preconditioner). The extra N values are a margin for the
+    // coarse heights and the allocator.
+    n.saturating_mul(8)
+        .saturating_add(build.max(iterate))
+        .saturating_add(n.saturating_mul(8))
 }
 
 /// Bytes the dense contact problem holds besides its operator: the kernel table, the

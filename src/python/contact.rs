@@ -287,6 +287,16 @@ impl ContactProblem {
         d.set_item("iterations", sol.iterations)?;
         d.set_item("applies", sol.applies)?;
         d.set_item("preconditioner_applies", sol.preconditioner_applies)?;
+        let c = sol.coarse;
+        d.set_item("coarse_levels", c.levels)?;
+        d.set_item("coarse_iterations", c.iterations)?;
+        d.set_item("coarse_applies", c.applies)?;
+        d.set_item("coarse_preconditioner_applies", c.preconditioner_applies)?;
+        d.set_item("coarse_applies_fine_equivalent", c.applies_fine_equivalent)?;
+        d.set_item(
+            "coarse_preconditioner_fine_equivalent",
+            c.preconditioner_fine_equivalent,
+        )?;
         d.set_item("kkt", sol.kkt)?;
         d.set_item("contact_points", sol.contact_points)?;
         d.set_item("seconds", seconds)?;
@@ -321,7 +331,7 @@ pub(crate) mod pk_py {
     #[pyo3(signature = (
         heights, dx, e_star, boundary="free", approach=None, mean_pressure=None, tol=None,
         max_iter=None, initial_pressure=None, memory_limit=None, precondition=true,
-        operator_of=None
+        operator_of=None, coarse_start=true
     ))]
     #[allow(clippy::too_many_arguments)]
     pub(crate) fn solve_polonsky_keer<'py>(
@@ -338,6 +348,7 @@ pub(crate) mod pk_py {
         memory_limit: Option<u64>,
         precondition: bool,
         operator_of: Option<PyRef<'py, super::ContactProblem>>,
+        coarse_start: bool,
     ) -> PyResult<Bound<'py, PyDict>> {
         let op = operator_of
             .as_ref()
@@ -427,6 +438,7 @@ pub(crate) mod pk_py {
                 memory_limit: Some(memory_limit),
                 should_stop: Some(&should_stop),
                 precondition,
+                coarse_start,
             };
             crate::python::on_solver_pool(ny * nx, || match &op {
                 // The operator of a kept ContactProblem: no kernel or FFT set-up per solve.
@@ -450,6 +462,16 @@ pub(crate) mod pk_py {
         d.set_item("iterations", sol.iterations)?;
         d.set_item("applies", sol.applies)?;
         d.set_item("preconditioner_applies", sol.preconditioner_applies)?;
+        let c = sol.coarse;
+        d.set_item("coarse_levels", c.levels)?;
+        d.set_item("coarse_iterations", c.iterations)?;
+        d.set_item("coarse_applies", c.applies)?;
+        d.set_item("coarse_preconditioner_applies", c.preconditioner_applies)?;
+        d.set_item("coarse_applies_fine_equivalent", c.applies_fine_equivalent)?;
+        d.set_item(
+            "coarse_preconditioner_fine_equivalent",
+            c.preconditioner_fine_equivalent,
+        )?;
         d.set_item("kkt", sol.kkt)?;
         d.set_item("load", sol.load)?;
         d.set_item("mean_pressure", sol.mean_pressure)?;
