@@ -312,8 +312,7 @@ class TestExecutors:
         """A worker dies after its sweep (os._exit): the pool is rebuilt, lost tasks rerun."""
         marker = tmp_path / "kill-once"
         marker.touch()
-        monkeypatch.setenv("LEAKPATH_TEST_KILL_ONCE", str(marker))
-        result = run_ensemble(tmp_path / "run", workers=2)
+        result = run_ensemble(tmp_path / "run", workers=2, _kill_once=str(marker))
         assert not marker.exists()  # a worker consumed it and died
         assert result.run["pool_restarts"] >= 1
         assert result.run["tasks_run"] == 2 * SURFACES
@@ -335,8 +334,9 @@ class TestExecutors:
             # A worker process dies mid-run (same hook); the scheduler address as executor.
             marker = tmp_path / "kill-once"
             marker.touch()
-            monkeypatch.setenv("LEAKPATH_TEST_KILL_ONCE", str(marker))
-            killed = run_ensemble(tmp_path / "dask-killed", executor=cluster.scheduler_address)
+            killed = run_ensemble(
+                tmp_path / "dask-killed", executor=cluster.scheduler_address, _kill_once=str(marker)
+            )
             assert not marker.exists()
             assert killed.run["tasks_run"] == 2 * SURFACES
             assert killed.aggregate_path.read_bytes() == reference.aggregate_path.read_bytes()
@@ -371,22 +371,19 @@ class TestResume:
         out = tmp_path / "run"
         log = tmp_path / "driver.log"
         with open(log, "wb") as fh:
+            # The command line, with the driver told to kill itself after 3 written tasks.
+            argv = ["ensemble", *CLI_ARGS, "--out", str(out), "--workers", "2", "--no-figures"]
+            code = (
+                "import functools, sys\n"
+                "import leakpath.ensemble as package\n"
+                "package.ensemble = functools.partial(package.ensemble, _stop_after=3)\n"
+                "from leakpath.cli import main\n"
+                f"sys.exit(main({argv!r}))\n"
+            )
             proc = subprocess.Popen(
-                [
-                    sys.executable,
-                    "-m",
-                    "leakpath",
-                    "ensemble",
-                    *CLI_ARGS,
-                    "--out",
-                    str(out),
-                    "--workers",
-                    "2",
-                    "--no-figures",
-                ],
+                [sys.executable, "-c", code],
                 stdout=fh,
                 stderr=subprocess.STDOUT,
-                env={**os.environ, "LEAKPATH_TEST_STOP_AFTER": "3"},
                 start_new_session=True,
             )
             try:

@@ -1,4 +1,4 @@
-"""Ensemble leak-rate statistics (leakpath.ensemble_leakage) against numpy written out here."""
+"""Ensemble leak-rate statistics (leakpath.ensemble._leakage) against numpy written out here."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from leakpath.ensemble import ensemble, t_critical
-from leakpath.ensemble_leakage import CONTACT_GRID, leak_threshold_from_rows, log_k_on_grid
+from leakpath.ensemble._leakage import CONTACT_GRID, leak_threshold_from_rows, log_k_on_grid
 
 
 def _rows(path):

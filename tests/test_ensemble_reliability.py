@@ -73,9 +73,9 @@ def test_killed_driver_under_a_piping_parent_leaves_nothing_alive(tmp_path: Path
     code = """
 from leakpath.ensemble import ensemble
 ensemble(params={{"m": 5, "D": 2.2}}, surfaces=8, levels=6, out={!r}, workers=2,
-         progress=False, figures=False)
+         progress=False, figures=False, _stop_after=1)
 """.format(str(tmp_path / "run"))
-    env = dict(os.environ, LEAKPATH_TEST_STOP_AFTER="1")
+    env = dict(os.environ)
     proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, env=env, start_new_session=True)
     sid = proc.pid

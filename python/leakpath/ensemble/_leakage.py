@@ -26,7 +26,10 @@ from typing import Any
 
 import numpy as np
 
-from .leakage import flow_axis_for
+from .._io import atomic_write_text
+from ..leakage import flow_axis_for
+from ._layout import _csv
+from ._stats import _describe, t_critical
 
 __all__ = [
     "BAND_QUANTILES",
@@ -104,7 +107,6 @@ def log_k_on_grid(
 
 def leak_bands(values: np.ndarray) -> list[dict[str, float]]:
     """Statistics per grid point of ``values`` (surfaces × grid; NaN = no value)."""
-    from .ensemble import t_critical
 
     rows = []
     for j in range(values.shape[1]):
@@ -138,8 +140,6 @@ def write_leak_statistics(
     """Write ``leakage.csv`` and ``leak_thresholds.csv`` (and ``figures/leak_bands``) for the
     ensemble in ``directory``; ``sets`` holds ``(param_set, seeds, tables)``. Returns the
     summary for ``ensemble.json`` (empty when the tables carry no leak-rate columns)."""
-    from ._io import atomic_write_text
-    from .ensemble import _csv, _describe
 
     if not sets or not all(has_flow(t) for _, _, tables in sets for t in tables):
         return {}
@@ -187,7 +187,7 @@ def write_leak_statistics(
 def _save_band_figure(outdir: Path, curves: Mapping[str, Any]) -> list[Path]:
     from matplotlib.figure import Figure
 
-    from .plotting.paper import save_figure
+    from ..plotting.paper import save_figure
 
     fig = Figure(figsize=(7.0, 4.6), layout="constrained")
     ax = fig.subplots()
