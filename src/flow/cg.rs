@@ -150,11 +150,17 @@ pub fn pcg(
             converged = rnorm <= tol * bnorm && measure(x, &r) <= 1.0;
             break;
         }
-        let alpha = rz / pq;
+        // α = r·p / p·Ap minimises the energy norm of the error along p even when p has
+        // lost its conjugacy (flexible preconditioner, replaced residuals): never a
+        // growing error. In exact arithmetic it equals r·z / p·Ap.
+        let alpha = dot(&r, &p) / pq;
         axpy(alpha, &p, x);
         axpy(-alpha, &q, &mut r);
         rnorm = dot(&r, &r).sqrt();
         it += 1;
+        if !rnorm.is_finite() {
+            break;
+        }
         checked = false;
         if rnorm <= tol * bnorm {
             true_residual(apply, b, x, &mut r);

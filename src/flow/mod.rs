@@ -421,9 +421,6 @@ fn solve_axis0(
     } else {
         let mg = Multigrid::new(fine);
         levels = mg.n_levels();
-        if std::env::var_os("LEAKPATH_MG_DEBUG").is_some() {
-            eprintln!("multigrid levels {:?}", mg.sizes());
-        }
         match solve_multigrid(&mg, &rhs, &b_out, opts, max_iter)? {
             Ok((x, psi, residual, it)) => {
                 iterations = it;
@@ -499,8 +496,8 @@ fn solve_axis0(
     let mut fb = vec![0.0; ny * (nx + 1)];
     fb.par_chunks_mut(nx + 1).enumerate().for_each(|(i, row)| {
         let base = i * nx;
-        for j in 1..nx {
-            row[j] = face(st.e[base + j - 1], base + j - 1, base + j);
+        for (j, v) in row.iter_mut().enumerate().take(nx).skip(1) {
+            *v = face(st.e[base + j - 1], base + j - 1, base + j);
         }
         if periodic && nx > 1 {
             let w = face(st.e[base + nx - 1], base + nx - 1, base);
@@ -573,11 +570,8 @@ fn solve_direct(
 ) -> Result<(Vec<f64>, Vec<f64>, f64)> {
     let n = b_in.len();
     let mut xs = vec![vec![0.0; n], vec![0.0; n]];
-    let refine = std::env::var("LEAKPATH_REFINE")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(2);
-    direct::solve(st, &[b_in, b_out], &mut xs, refine)?;
+
+    direct::solve(st, &[b_in, b_out], &mut xs, 2)?;
     let psi = xs.pop().expect("two solutions");
     let x = xs.pop().expect("two solutions");
     let residual = relative_residual(st, &x, b_in).max(relative_residual(st, &psi, b_out));

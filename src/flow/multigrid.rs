@@ -243,7 +243,9 @@ fn members(agg: &[u32], nc: usize) -> Members {
 fn galerkin<G: Neighbours>(g: &G, agg: &[u32], mem: &Members) -> Graph {
     let nc = mem.ptr.len() - 1;
     // Rows in fixed blocks: each block's entries in row order, blocks concatenated in order.
-    let blocks: Vec<(Vec<usize>, Vec<u32>, Vec<f64>, Vec<f64>)> = (0..nc.div_ceil(CHUNK))
+    // Per block: row lengths, columns, weights, reservoir conductances.
+    type Block = (Vec<usize>, Vec<u32>, Vec<f64>, Vec<f64>);
+    let blocks: Vec<Block> = (0..nc.div_ceil(CHUNK))
         .into_par_iter()
         .map(|blk| {
             let rows = blk * CHUNK..((blk + 1) * CHUNK).min(nc);
@@ -689,6 +691,7 @@ impl DenseCholesky {
         DenseCholesky { n, l }
     }
 
+    #[allow(clippy::needless_range_loop)]
     fn solve(&self, b: &[f64], x: &mut [f64]) {
         let n = self.n;
         for k in 0..n {
