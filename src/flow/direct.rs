@@ -22,9 +22,9 @@ fn failed(what: impl std::fmt::Display) -> Error {
     }
 }
 
-/// Solves `A x = b` on the active cells of `st` (others get 0), with `refine` steps of
-/// iterative refinement.
-pub fn solve(st: &Stencil, b: &[f64], x: &mut [f64], refine: usize) -> Result<()> {
+/// Solves `A x_c = b_c` for every right-hand side `b_c` of `rhs` on the active cells of `st`
+/// (others get 0) with one factor, `refine` steps of iterative refinement each.
+pub fn solve(st: &Stencil, rhs: &[&[f64]], xs: &mut [Vec<f64>], refine: usize) -> Result<()> {
     let (ny, nx) = (st.ny, st.nx);
     let n = ny * nx;
     let mut index = vec![usize::MAX; n];
@@ -36,7 +36,9 @@ pub fn solve(st: &Stencil, b: &[f64], x: &mut [f64], refine: usize) -> Result<()
         }
     }
     let m = cells.len();
-    x.iter_mut().for_each(|v| *v = 0.0);
+    for x in xs.iter_mut() {
+        x.iter_mut().for_each(|v| *v = 0.0);
+    }
     if m == 0 {
         return Ok(());
     }
@@ -100,18 +102,20 @@ pub fn solve(st: &Stencil, b: &[f64], x: &mut [f64], refine: usize) -> Result<()
         .map_err(|e| failed(format!("{e:?}")))?;
     let mut sbuf = MemBuffer::try_new(sym.solve_in_place_scratch::<f64>(1, par))
         .map_err(|_| failed("out of memory"))?;
-    let mut rhs = Mat::<f64>::from_fn(m, 1, |r, _| b[cells[r]]);
-    llt.solve_in_place_with_conj(Conj::No, rhs.as_mut(), par, MemStack::new(&mut sbuf));
-    for (r, &k) in cells.iter().enumerate() {
-        x[k] = rhs[(r, 0)];
-    }
     let mut res = vec![0.0; n];
-    for _ in 0..refine {
-        st.residual(x, b, &mut res);
-        let mut corr = Mat::<f64>::from_fn(m, 1, |r, _| res[cells[r]]);
-        llt.solve_in_place_with_conj(Conj::No, corr.as_mut(), par, MemStack::new(&mut sbuf));
+    for (b, x) in rhs.iter().zip(xs.iter_mut()) {
+        let mut sol = Mat::<f64>::from_fn(m, 1, |r, _| b[cells[r]]);
+        llt.solve_in_place_with_conj(Conj::No, sol.as_mut(), par, MemStack::new(&mut sbuf));
         for (r, &k) in cells.iter().enumerate() {
-            x[k] += corr[(r, 0)];
+            x[k] = sol[(r, 0)];
+        }
+        for _ in 0..refine {
+            st.residual(x, b, &mut res);
+            let mut corr = Mat::<f64>::from_fn(m, 1, |r, _| res[cells[r]]);
+            llt.solve_in_place_with_conj(Conj::No, corr.as_mut(), par, MemStack::new(&mut sbuf));
+            for (r, &k) in cells.iter().enumerate() {
+                x[k] += corr[(r, 0)];
+            }
         }
     }
     Ok(())

@@ -155,14 +155,18 @@ pub struct Solution {
     pub iterations: usize,
     pub n_unknowns: usize,
     pub levels: usize,
+    /// Why the multigrid CG was abandoned for the sparse Cholesky factor (`Solver::Auto`
+    /// only), if it was.
+    pub multigrid_failure: Option<String>,
 }
 
 /// Bytes a solve of `cells` cells needs (inputs not counted).
 pub fn memory_estimate(cells: usize) -> u64 {
     let c = cells as u64;
-    // transposed inputs 9, labels 4, open mask 1, conductance 8, fine operator 33, rhs 8,
-    // CG vectors x, r, z, p, q and the V-cycle's work vector 48, outputs pressure + two fluxes 24.
-    c * (9 + 4 + 1 + 8 + 33 + 8 + 48 + 24) + multigrid::memory_estimate(cells)
+    // transposed inputs 9, labels 4, open mask 1, conductance 8, fine operator 33, two
+    // right-hand sides 16, CG vectors φ, ψ, r, z, p, q and the cycle's work vector 56,
+    // outputs pressure + two fluxes 24.
+    c * (9 + 4 + 1 + 8 + 33 + 16 + 56 + 24) + multigrid::memory_estimate(cells)
 }
 
 fn validate(pr: &Problem<'_>, opts: &Options<'_>) -> Result<()> {
@@ -265,8 +269,7 @@ pub fn solve(pr: &Problem<'_>, opts: &Options<'_>) -> Result<Solution> {
         let factor = match opts.solver {
             Solver::Multigrid => 0,
             Solver::Auto if cells > DIRECT_MAX_UNKNOWNS => 0,
-            // AMD on a 2-D grid: a few tens of factor entries (value + row index) per cell.
-            _ => 40 * 16 * cells as u64,
+            _ => cholesky_estimate(cells),
         };
         let need = memory_estimate(cells) + factor;
         if need > limit {
@@ -327,13 +330,8 @@ pub fn solve(pr: &Problem<'_>, opts: &Options<'_>) -> Result<Solution> {
         iterations: unit.iterations,
         n_unknowns: unit.n_unknowns,
         levels: unit.levels,
+        multigrid_failure: unit.multigrid_failure,
     })
-}
-
-/// The fine operator, alone or inside the multigrid hierarchy built on it.
-enum System {
-    Plain(assemble::Stencil),
-    Multigrid(Multigrid),
 }
 
 /// The dimensionless solution for flow along axis 0 with `φ = 1` at the inlet, 0 at the outlet,
@@ -350,6 +348,7 @@ struct UnitSolution {
     iterations: usize,
     n_unknowns: usize,
     levels: usize,
+    multigrid_failure: Option<String>,
 }
 
 fn solve_axis0(
@@ -399,69 +398,53 @@ fn solve_axis0(
         .count();
 
     let (fine, rhs) = fine_stencil(&c, ny, nx, periodic);
-    let mut x = vec![0.0; n];
+    // The outlet reservoir's share of the diagonal: `Q_out = b_out · φ`, and `ψ = 1 − φ` (the
+    // flow reversed) solves `A ψ = b_out` with `Q_in = b_in · ψ`.
+    let b_out: Vec<f64> = (0..n)
+        .into_par_iter()
+        .map(|k| if k >= (ny - 1) * nx { 2.0 * c[k] } else { 0.0 })
+        .collect();
     let max_iter = opts.max_iter.unwrap_or(DEFAULT_MAX_ITER);
     let direct = match opts.solver {
         Solver::Auto => n_unknowns <= DIRECT_MAX_UNKNOWNS,
         Solver::Cholesky => true,
         Solver::Multigrid => false,
     };
-    let (system, outcome, levels) = if direct {
-        direct::solve(&fine, &rhs, &mut x, 2)?;
-        let mut r = vec![0.0; n];
-        fine.residual(&x, &rhs, &mut r);
-        let bb = cg::dot(&rhs, &rhs);
-        let residual = if bb > 0.0 {
-            (cg::dot(&r, &r) / bb).sqrt()
-        } else {
-            0.0
-        };
-        let outcome = cg::Outcome {
-            iterations: 0,
-            residual,
-        };
-        (System::Plain(fine), outcome, 0)
+    let mut iterations = 0;
+    let mut levels = 0;
+    let mut multigrid_failure = None;
+    let (st, x, psi, residual) = if n_unknowns == 0 {
+        (fine, vec![0.0; n], vec![0.0; n], 0.0)
+    } else if direct {
+        let (x, psi, residual) = solve_direct(&fine, &rhs, &b_out)?;
+        (fine, x, psi, residual)
     } else {
         let mg = Multigrid::new(fine);
-        let levels = mg.n_levels();
-        let outcome = {
-            let mut work = vec![0.0; n];
-            let apply = |v: &[f64], out: &mut [f64]| mg.fine().apply(v, out);
-            let mut pre = |r: &[f64], z: &mut [f64]| mg.apply(r, z, &mut work);
-            // Σ r = Q_in − Q_out: go on until the inlet and outlet flow rates agree to
-            // `tol` too, or round-off stops the progress.
-            let st = mg.fine();
-            let balanced = |x: &[f64], r: &[f64]| {
-                let q_out: f64 = (0..nx)
-                    .map(|j| st.dir[(ny - 1) * nx + j] * x[(ny - 1) * nx + j])
-                    .sum();
-                let imbalance = cg::sum(r);
-                imbalance.abs() / (opts.tol * q_out.abs())
-            };
-            cg::pcg(
-                &apply,
-                &mut pre,
-                &balanced,
-                &rhs,
-                &mut x,
-                opts.tol,
-                max_iter,
-                opts.should_stop,
-            )?
-        };
-        (System::Multigrid(mg), outcome, levels)
+        levels = mg.n_levels();
+        match solve_multigrid(&mg, &rhs, &b_out, opts, max_iter)? {
+            Ok((x, psi, residual, it)) => {
+                iterations = it;
+                (mg.into_fine(), x, psi, residual)
+            }
+            Err(failure) => {
+                // Never a biased flow rate: factor the system when that fits, else report.
+                let fine = mg.into_fine();
+                let need = memory_estimate(n) + cholesky_estimate(n);
+                let fits = opts.solver == Solver::Auto
+                    && opts.memory_limit.is_none_or(|l| need <= l)
+                    && available_memory().is_none_or(|a| need <= a);
+                if !fits {
+                    return Err(failure);
+                }
+                multigrid_failure = Some(failure);
+                levels = 0;
+                let (x, psi, residual) = solve_direct(&fine, &rhs, &b_out)?;
+                (fine, x, psi, residual)
+            }
+        }
     };
-    if outcome.residual > 10.0 * opts.tol {
-        return Err(Error::NotConverged {
-            iterations: outcome.iterations,
-            residual: outcome.residual,
-            what: "reynolds-flow".into(),
-        });
-    }
-    let st = match &system {
-        System::Plain(st) => st,
-        System::Multigrid(mg) => mg.fine(),
-    };
+    drop(rhs);
+    let st = &st;
     // Pressures: solution on spanning cells, reservoir pressure on one-sided clusters.
     let phi: Vec<f64> = (0..n)
         .into_par_iter()
@@ -473,7 +456,18 @@ fn solve_axis0(
         })
         .collect();
     drop(labels);
-    drop(x);
+    // A face flux `c_f (φ1 − φ2)` loses the digits of `φ` near 1 (all of the inlet side near
+    // the percolation threshold, where the flow is many decades below the conductances):
+    // there the same flux is `c_f (ψ2 − ψ1)` with `ψ = 1 − φ` solved for directly.
+    let face = |cf: f64, k: usize, l: usize| -> f64 {
+        if cf <= 0.0 {
+            0.0
+        } else if x[k] + x[l] <= 1.0 {
+            cf * (x[k] - x[l])
+        } else {
+            cf * (psi[l] - psi[k])
+        }
+    };
     // Fluxes along: (ny + 1) × nx.
     let mut fa = vec![0.0; (ny + 1) * nx];
     fa.par_chunks_mut(nx).enumerate().for_each(|(i, row)| {
@@ -481,7 +475,7 @@ fn solve_axis0(
             row[j] = if i == 0 {
                 let cf = 2.0 * c[j];
                 if cf > 0.0 {
-                    cf * (1.0 - phi[j])
+                    cf * psi[j]
                 } else {
                     0.0
                 }
@@ -489,43 +483,30 @@ fn solve_axis0(
                 let k = (ny - 1) * nx + j;
                 let cf = 2.0 * c[k];
                 if cf > 0.0 {
-                    cf * phi[k]
+                    cf * x[k]
                 } else {
                     0.0
                 }
             } else {
                 let k = (i - 1) * nx + j;
-                let cf = st.s[k];
-                if cf > 0.0 {
-                    cf * (phi[k] - phi[k + nx])
-                } else {
-                    0.0
-                }
+                face(st.s[k], k, k + nx)
             };
         }
     });
     let mut fb = vec![0.0; ny * (nx + 1)];
     fb.par_chunks_mut(nx + 1).enumerate().for_each(|(i, row)| {
         let base = i * nx;
-        for j in 1..nx {
-            let cf = st.e[base + j - 1];
-            row[j] = if cf > 0.0 {
-                cf * (phi[base + j - 1] - phi[base + j])
-            } else {
-                0.0
-            };
+        for (j, v) in row.iter_mut().enumerate().take(nx).skip(1) {
+            *v = face(st.e[base + j - 1], base + j - 1, base + j);
         }
         if periodic && nx > 1 {
-            let cf = st.e[base + nx - 1];
-            let w = if cf > 0.0 {
-                cf * (phi[base + nx - 1] - phi[base])
-            } else {
-                0.0
-            };
+            let w = face(st.e[base + nx - 1], base + nx - 1, base);
             row[0] = w;
             row[nx] = w;
         }
     });
+    drop(x);
+    drop(psi);
     let q_in: f64 = fa[..nx].iter().sum();
     let q_out: f64 = fa[ny * nx..].iter().sum();
     // Net flux out of every cell.
@@ -553,12 +534,147 @@ fn solve_axis0(
         flux_across: fb,
         q_out,
         q_in,
-        residual: outcome.residual,
+        residual,
         conservation,
-        iterations: outcome.iterations,
+        iterations,
         n_unknowns,
         levels,
+        multigrid_failure: multigrid_failure.map(|e| e.to_string()),
     })
+}
+
+/// Largest relative difference allowed between the inlet and the outlet flow rates.
+pub const FLUX_AGREEMENT: f64 = 1e-9;
+
+/// `Σ a_k b_k` over the solution's two right-hand sides, and the inlet/outlet test.
+fn rates_agree(q_in: f64, q_out: f64) -> bool {
+    (q_in - q_out).abs() <= FLUX_AGREEMENT * q_out.abs()
+}
+
+fn relative_residual(st: &assemble::Stencil, x: &[f64], b: &[f64]) -> f64 {
+    let mut r = vec![0.0; b.len()];
+    st.residual(x, b, &mut r);
+    let bb = cg::dot(b, b);
+    if bb > 0.0 {
+        (cg::dot(&r, &r) / bb).sqrt()
+    } else {
+        0.0
+    }
+}
+
+/// `φ` and `ψ` from one sparse Cholesky factor; the larger of their relative residuals.
+fn solve_direct(
+    st: &assemble::Stencil,
+    b_in: &[f64],
+    b_out: &[f64],
+) -> Result<(Vec<f64>, Vec<f64>, f64)> {
+    let n = b_in.len();
+    let mut xs = vec![vec![0.0; n], vec![0.0; n]];
+
+    direct::solve(st, &[b_in, b_out], &mut xs, 2)?;
+    let psi = xs.pop().expect("two solutions");
+    let x = xs.pop().expect("two solutions");
+    let residual = relative_residual(st, &x, b_in).max(relative_residual(st, &psi, b_out));
+    Ok((x, psi, residual))
+}
+
+/// `Σ (1 − x_k) r_k`: to first order the error of the rate `w · x` of a solution `x` with
+/// residual `r`, since `w · (x* − x) = ψ* · r` with the adjoint `ψ* = A⁻¹ w = 1 − x*`.
+fn rate_error(x: &[f64], r: &[f64]) -> f64 {
+    let parts: Vec<f64> = x
+        .par_chunks(cg::CHUNK)
+        .zip(r.par_chunks(cg::CHUNK))
+        .map(|(xc, rc)| xc.iter().zip(rc).map(|(u, v)| (1.0 - u) * v).sum::<f64>())
+        .collect();
+    parts.iter().sum()
+}
+
+/// `φ` and `ψ` by multigrid-preconditioned CG, each until its relative residual is `≤ tol`
+/// and its flow rate is accurate to `10 tol` (estimated from the true residual by
+/// [`rate_error`]); then the inlet and outlet rates must agree to [`FLUX_AGREEMENT`]. The
+/// inner `Err` is the failure to report (or to recover from with the direct solver).
+type MultigridOk = (Vec<f64>, Vec<f64>, f64, usize);
+fn solve_multigrid(
+    mg: &Multigrid,
+    b_in: &[f64],
+    b_out: &[f64],
+    opts: &Options<'_>,
+    max_iter: usize,
+) -> Result<std::result::Result<MultigridOk, Error>> {
+    let n = b_in.len();
+    let st = mg.fine();
+    let qtol = opts.tol;
+    let mut work = vec![0.0; n];
+    let apply = |v: &[f64], out: &mut [f64]| st.apply(v, out);
+    let mut pre = |r: &[f64], z: &mut [f64]| mg.apply(r, z, &mut work);
+    fn accurate(w: &[f64], qtol: f64) -> impl Fn(&[f64], &[f64]) -> f64 + '_ {
+        move |x: &[f64], r: &[f64]| rate_error(x, r).abs() / (qtol * cg::dot(w, x).abs())
+    }
+    let mut x = vec![0.0; n];
+    let a = cg::pcg(
+        &apply,
+        &mut pre,
+        &accurate(b_out, qtol),
+        b_in,
+        &mut x,
+        opts.tol,
+        max_iter,
+        opts.should_stop,
+    )?;
+    let failed = |o: &cg::Outcome, what: &str| Error::NotConverged {
+        iterations: o.iterations,
+        residual: o.residual,
+        what: format!("reynolds-flow multigrid CG ({what})"),
+    };
+    if !a.converged {
+        return Ok(Err(failed(&a, "pressure")));
+    }
+    // ψ from 1 − φ: only the digits that φ cannot hold near 1 are left to find.
+    let mut psi: Vec<f64> = x
+        .par_iter()
+        .zip(st.active.par_iter())
+        .map(|(&v, &on)| if on { 1.0 - v } else { 0.0 })
+        .collect();
+    let b = cg::pcg(
+        &apply,
+        &mut pre,
+        &accurate(b_in, qtol),
+        b_out,
+        &mut psi,
+        opts.tol,
+        max_iter,
+        opts.should_stop,
+    )?;
+    let total = cg::Outcome {
+        iterations: a.iterations + b.iterations,
+        residual: a.residual.max(b.residual),
+        converged: b.converged,
+    };
+    if !b.converged {
+        return Ok(Err(failed(&total, "reversed pressure")));
+    }
+    let (q_out, q_in) = (cg::dot(b_out, &x), cg::dot(b_in, &psi));
+    if !rates_agree(q_in, q_out) {
+        return Ok(Err(failed(
+            &total,
+            &format!("inlet rate {q_in:e} and outlet rate {q_out:e} differ"),
+        )));
+    }
+    Ok(Ok((x, psi, total.residual, total.iterations)))
+}
+
+/// Bytes of a sparse Cholesky factor of `cells` unknowns (AMD on a 2-D grid: a few tens of
+/// entries, value and row index, per unknown).
+fn cholesky_estimate(cells: usize) -> u64 {
+    40 * 16 * cells as u64
+}
+
+/// `MemAvailable` of `/proc/meminfo` (Linux), in bytes.
+fn available_memory() -> Option<u64> {
+    let text = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let line = text.lines().find(|l| l.starts_with("MemAvailable:"))?;
+    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kib * 1024)
 }
 
 #[cfg(test)]

@@ -1,19 +1,36 @@
 //! Aggregation multigrid preconditioner for the 5-point Reynolds operator.
 //!
-//! Coarsening: 2 × 2 aggregates of the structured grid (the last row or column alone when the
-//! size is odd), piecewise-constant prolongation `P` restricted to cells with unknowns, and
-//! the Galerkin coarse operator `Pᵀ A P`. For a conductance (graph-Laplacian) operator this
-//! is again a 5-point conductance operator: a coarse face is the sum of the fine faces that
-//! cross between two aggregates, the reservoir conductances add up, and faces inside an
-//! aggregate drop out. So every level keeps the structured layout, the coefficients follow
-//! the jumps of `g³` exactly (nothing is interpolated across a contact), and the coarse
-//! operators stay symmetric M-matrices.
+//! # Coarsening that follows the conductances
 //!
-//! Smoother: red–black Gauss–Seidel, parallel over rows; the post-smoother runs the colours
-//! (and the cells of a row) in reverse order, so the V-cycle is a symmetric operator and can
-//! precondition conjugate gradients. The coarsest level is solved exactly with a banded
-//! Cholesky factor. Every cell is updated by the same arithmetic whatever the thread count,
-//! so the preconditioner is deterministic.
+//! Near the percolation threshold the spanning cluster is a tortuous maze of necks, dead ends
+//! and walls one cell thick, with conductances `g³` spanning many decades. Fixed 2 × 2 blocks
+//! of the grid then lump together cells on both sides of a wall, or a wide channel with the
+//! neck that throttles it, and the coarse space cannot represent the pressure drop across
+//! them: conjugate gradients stall. So the aggregates are built from the matrix, by
+//! *double pairwise aggregation* (Notay, ETNA 37, 2010): every unknown is paired with its
+//! strongest unpaired neighbour `j`, provided the face is strong,
+//!
+//! ```text
+//! w_ij ≥ β max(max_k w_ik, max_k w_jk),   β = 1/4,
+//! ```
+//!
+//! else it stays alone; two such passes give aggregates of up to four connected cells.
+//! Prolongation is piecewise constant on the aggregates and the coarse operator is the
+//! Galerkin `Pᵀ A P`, which for a conductance operator is again one: coarse face weights are
+//! sums of the fine faces between two aggregates, reservoir conductances add up, and the
+//! diagonal is rebuilt as reservoir + Σ faces (no cancellation), so every level is a
+//! symmetric M-matrix. Aggregates never join cells that are not joined by a face.
+//!
+//! # Cycle
+//!
+//! The finest level keeps the structured stencil and red–black Gauss–Seidel (parallel over
+//! rows); the coarse levels are sparse (compressed rows) and use a hybrid Gauss–Seidel: rows
+//! in fixed blocks of [`CHUNK`], Gauss–Seidel inside a block, the other blocks' values from
+//! before the sweep. Post-smoothing runs everything in reverse, so each cycle is a symmetric
+//! operator. Coarse levels are solved by two steps of Krylov acceleration of the next cycle
+//! (the K-cycle of Notay and Vassilevski), the coarsest (≤ [`COARSEST`] unknowns) by a
+//! dense Cholesky factor. Block boundaries do not depend on the thread count and every value
+//! is computed by the same arithmetic, so the preconditioner is deterministic.
 
 use std::sync::Mutex;
 
@@ -22,10 +39,42 @@ use rayon::prelude::*;
 use super::assemble::{Stencil, ROWS_PER_TASK};
 use super::cg::{dot, CHUNK};
 
-/// Coarsening stops at this many cells; the coarsest level is factored.
-const COARSEST_CELLS: usize = 2048;
+/// Coarsening stops at this many unknowns; the coarsest level is factored (dense).
+const COARSEST: usize = 400;
 
-/// Work vectors of one level.
+/// Strength threshold β of the pairing.
+const STRONG: f64 = 0.25;
+
+/// Most levels built (a guard; coarsening by about four gives far fewer).
+const MAX_LEVELS: usize = 40;
+
+/// No aggregate (cells without unknowns).
+const NONE: u32 = u32::MAX;
+
+/// A conductance operator in compressed rows: `(A x)_i = d_i x_i − Σ_j w_ij x_j`,
+/// `d_i = dir_i + Σ_j w_ij`.
+pub struct Graph {
+    n: usize,
+    ptr: Vec<usize>,
+    col: Vec<u32>,
+    w: Vec<f64>,
+    dir: Vec<f64>,
+    d: Vec<f64>,
+}
+
+/// Fine cells of every aggregate (counting-sorted, ascending).
+struct Members {
+    ptr: Vec<usize>,
+    list: Vec<u32>,
+}
+
+/// The map from one level to the next.
+struct Map {
+    agg: Vec<u32>,
+    members: Members,
+}
+
+/// Work vectors of one coarse level.
 struct Buffers {
     x: Vec<f64>,
     b: Vec<f64>,
@@ -34,42 +83,341 @@ struct Buffers {
     v1: Vec<f64>,
     c2: Vec<f64>,
     v2: Vec<f64>,
+    old: Vec<f64>,
 }
 
-/// The multigrid hierarchy (one V-cycle per application).
+/// The multigrid hierarchy (one cycle per application).
 pub struct Multigrid {
-    /// Operators, finest first.
-    ops: Vec<Stencil>,
+    fine: Stencil,
+    /// `maps[0]`: fine cells → `levels[0]`; `maps[l]`: `levels[l − 1]` → `levels[l]`.
+    maps: Vec<Map>,
+    levels: Vec<Graph>,
     bufs: Mutex<Vec<Buffers>>,
-    coarse: BandCholesky,
-    /// Pre- and post-smoothing sweeps (each a red and a black half-sweep).
-    pub sweeps: usize,
+    coarse: DenseCholesky,
 }
 
-/// Bytes of the coarse levels below a finest level of `cells` cells.
+/// Bytes of the hierarchy below a finest level of `cells` cells.
 pub fn memory_estimate(cells: usize) -> u64 {
-    // Per coarse level: x, b, r and the K-cycle's c1, v1, c2, v2 (56 B) and the operator (e, s, dir, d: 32 B, mask 1 B); the
-    // coarse levels add up to a third of the fine one.
-    (cells as u64).div_ceil(3) * (56 + 33)
+    // Fine map: aggregate 4 B + member 4 B per cell. Coarse levels (together under a third of
+    // the fine cells): per unknown 8 work vectors (64 B), dir and d (16 B), row pointer 8 B,
+    // about 8 face entries of 12 B, two maps (16 B); plus the intermediate pairwise level
+    // while building (half the fine size, ≈ 120 B per unknown).
+    let c = cells as u64;
+    8 * c + c.div_ceil(3) * (64 + 16 + 8 + 96 + 16) + c.div_ceil(2) * 120
+}
+
+/// Neighbour access for the pairing and the Galerkin product.
+trait Neighbours: Sync {
+    fn len(&self) -> usize;
+    fn active(&self, i: usize) -> bool;
+    fn reservoir(&self, i: usize) -> f64;
+    /// Calls `f(j, w_ij)` for the faces of `i` with `w_ij > 0`.
+    fn for_each(&self, i: usize, f: impl FnMut(usize, f64));
+}
+
+impl Neighbours for Stencil {
+    fn len(&self) -> usize {
+        self.ny * self.nx
+    }
+    fn active(&self, i: usize) -> bool {
+        self.active[i]
+    }
+    fn reservoir(&self, i: usize) -> f64 {
+        self.dir[i]
+    }
+    #[inline(always)]
+    fn for_each(&self, k: usize, mut f: impl FnMut(usize, f64)) {
+        let (ny, nx) = (self.ny, self.nx);
+        let (i, j) = (k / nx, k % nx);
+        let base = i * nx;
+        let mut face = |l: usize, w: f64| {
+            if w > 0.0 {
+                f(l, w)
+            }
+        };
+        if j + 1 < nx {
+            face(k + 1, self.e[k]);
+        } else if self.periodic && nx > 1 {
+            face(base, self.e[k]);
+        }
+        if let Some(wj) = self.west(j) {
+            face(base + wj, self.e[base + wj]);
+        }
+        if i + 1 < ny {
+            face(k + nx, self.s[k]);
+        }
+        if i > 0 {
+            face(k - nx, self.s[k - nx]);
+        }
+    }
+}
+
+impl Neighbours for Graph {
+    fn len(&self) -> usize {
+        self.n
+    }
+    fn active(&self, _i: usize) -> bool {
+        true
+    }
+    fn reservoir(&self, i: usize) -> f64 {
+        self.dir[i]
+    }
+    #[inline(always)]
+    fn for_each(&self, i: usize, mut f: impl FnMut(usize, f64)) {
+        for p in self.ptr[i]..self.ptr[i + 1] {
+            f(self.col[p] as usize, self.w[p]);
+        }
+    }
+}
+
+/// One pairwise pass: aggregate index per unknown (`NONE` when inactive) and their number.
+fn pair<G: Neighbours>(g: &G, beta: f64) -> (Vec<u32>, usize) {
+    let n = g.len();
+    let wmax: Vec<f64> = (0..n)
+        .into_par_iter()
+        .with_min_len(CHUNK)
+        .map(|i| {
+            let mut m: f64 = 0.0;
+            g.for_each(i, |_, w| m = m.max(w));
+            m
+        })
+        .collect();
+    let mut agg = vec![NONE; n];
+    let mut nc: u32 = 0;
+    for i in 0..n {
+        if agg[i] != NONE || !g.active(i) {
+            continue;
+        }
+        let (mut best, mut bw) = (usize::MAX, 0.0);
+        let (mut near, mut nw) = (usize::MAX, 0.0);
+        g.for_each(i, |j, w| {
+            if j == i || w < beta * wmax[i].max(wmax[j]) {
+                return;
+            }
+            if agg[j] == NONE && w > bw {
+                best = j;
+                bw = w;
+            }
+            if agg[j] != NONE && w > nw {
+                near = j;
+                nw = w;
+            }
+        });
+        if best == usize::MAX && near != usize::MAX {
+            // Every strong neighbour is taken (a dead end off a junction): join the strongest
+            // one's aggregate rather than stay alone, or a star never coarsens.
+            agg[i] = agg[near];
+            continue;
+        }
+        agg[i] = nc;
+        if best != usize::MAX {
+            agg[best] = nc;
+        }
+        nc += 1;
+    }
+    (agg, nc as usize)
+}
+
+fn members(agg: &[u32], nc: usize) -> Members {
+    let mut ptr = vec![0usize; nc + 1];
+    for &a in agg {
+        if a != NONE {
+            ptr[a as usize + 1] += 1;
+        }
+    }
+    for i in 0..nc {
+        ptr[i + 1] += ptr[i];
+    }
+    let mut next = ptr[..nc].to_vec();
+    let mut list = vec![0u32; ptr[nc]];
+    for (i, &a) in agg.iter().enumerate() {
+        if a != NONE {
+            list[next[a as usize]] = i as u32;
+            next[a as usize] += 1;
+        }
+    }
+    Members { ptr, list }
+}
+
+/// Galerkin coarse operator `Pᵀ A P` for the aggregates `agg` (their members `mem`).
+fn galerkin<G: Neighbours>(g: &G, agg: &[u32], mem: &Members) -> Graph {
+    let nc = mem.ptr.len() - 1;
+    // Rows in fixed blocks: each block's entries in row order, blocks concatenated in order.
+    // Per block: row lengths, columns, weights, reservoir conductances.
+    type Block = (Vec<usize>, Vec<u32>, Vec<f64>, Vec<f64>);
+    let blocks: Vec<Block> = (0..nc.div_ceil(CHUNK))
+        .into_par_iter()
+        .map(|blk| {
+            let rows = blk * CHUNK..((blk + 1) * CHUNK).min(nc);
+            let mut len = Vec::with_capacity(rows.len());
+            let mut col = Vec::new();
+            let mut w = Vec::new();
+            let mut dir = Vec::with_capacity(rows.len());
+            let mut row: Vec<(u32, f64)> = Vec::new();
+            for ci in rows {
+                row.clear();
+                let mut dsum = 0.0;
+                for &m in &mem.list[mem.ptr[ci]..mem.ptr[ci + 1]] {
+                    dsum += g.reservoir(m as usize);
+                    g.for_each(m as usize, |j, wj| {
+                        let cj = agg[j];
+                        if cj as usize != ci && cj != NONE {
+                            match row.iter_mut().find(|e| e.0 == cj) {
+                                Some(e) => e.1 += wj,
+                                None => row.push((cj, wj)),
+                            }
+                        }
+                    });
+                }
+                row.sort_unstable_by_key(|e| e.0);
+                len.push(row.len());
+                for &(c, v) in &row {
+                    col.push(c);
+                    w.push(v);
+                }
+                dir.push(dsum);
+            }
+            (len, col, w, dir)
+        })
+        .collect();
+    let nnz: usize = blocks.iter().map(|b| b.1.len()).sum();
+    let mut ptr = Vec::with_capacity(nc + 1);
+    let mut col = Vec::with_capacity(nnz);
+    let mut w = Vec::with_capacity(nnz);
+    let mut dir = Vec::with_capacity(nc);
+    ptr.push(0);
+    for (l, c, v, d) in blocks {
+        for len in l {
+            ptr.push(ptr.last().copied().unwrap_or(0) + len);
+        }
+        col.extend_from_slice(&c);
+        w.extend_from_slice(&v);
+        dir.extend_from_slice(&d);
+    }
+    let d = (0..nc)
+        .into_par_iter()
+        .with_min_len(CHUNK)
+        .map(|i| dir[i] + w[ptr[i]..ptr[i + 1]].iter().sum::<f64>())
+        .collect();
+    Graph {
+        n: nc,
+        ptr,
+        col,
+        w,
+        dir,
+        d,
+    }
+}
+
+/// Two pairwise passes on `g`: the map to the coarse level and the coarse operator.
+fn coarsen<G: Neighbours>(g: &G) -> (Map, Graph) {
+    let active = (0..g.len()).filter(|&i| g.active(i)).count();
+    // Relax the strength test when strong pairs are too few to coarsen (a chain of faces
+    // alternating strong and weak): convergence needs the levels to shrink.
+    let pass = |h: &dyn Fn(f64) -> (Vec<u32>, usize), n: usize| {
+        let (a, nc) = h(STRONG);
+        if nc * 10 > n * 9 {
+            h(0.0)
+        } else {
+            (a, nc)
+        }
+    };
+    let (a1, n1) = pass(&|beta| pair(g, beta), active);
+    let m1 = members(&a1, n1);
+    let g1 = galerkin(g, &a1, &m1);
+    drop(m1);
+    let (a2, n2) = pass(&|beta| pair(&g1, beta), n1);
+    let agg: Vec<u32> = a1
+        .par_iter()
+        .with_min_len(CHUNK)
+        .map(|&a| if a == NONE { NONE } else { a2[a as usize] })
+        .collect();
+    let m2 = members(&a2, n2);
+    let coarse = galerkin(&g1, &a2, &m2);
+    drop(m2);
+    let members = members(&agg, n2);
+    (Map { agg, members }, coarse)
+}
+
+impl Graph {
+    /// `y = A x`.
+    fn apply(&self, x: &[f64], y: &mut [f64]) {
+        y.par_chunks_mut(CHUNK).enumerate().for_each(|(blk, yc)| {
+            let i0 = blk * CHUNK;
+            for (t, yv) in yc.iter_mut().enumerate() {
+                let i = i0 + t;
+                let mut v = self.d[i] * x[i];
+                for p in self.ptr[i]..self.ptr[i + 1] {
+                    v -= self.w[p] * x[self.col[p] as usize];
+                }
+                *yv = v;
+            }
+        });
+    }
+
+    /// `r = b − A x`.
+    fn residual(&self, x: &[f64], b: &[f64], r: &mut [f64]) {
+        self.apply(x, r);
+        r.par_chunks_mut(CHUNK)
+            .zip(b.par_chunks(CHUNK))
+            .for_each(|(rc, bc)| rc.iter_mut().zip(bc).for_each(|(rv, bv)| *rv = bv - *rv));
+    }
+
+    /// Hybrid Gauss–Seidel sweep (module docs); `old` is scratch of size `n`.
+    fn smooth(&self, b: &[f64], x: &mut [f64], old: &mut [f64], reverse: bool) {
+        old.copy_from_slice(x);
+        let old = &*old;
+        x.par_chunks_mut(CHUNK).enumerate().for_each(|(blk, xc)| {
+            let i0 = blk * CHUNK;
+            let i1 = i0 + xc.len();
+            let mut update = |t: usize| {
+                let i = i0 + t;
+                let mut v = b[i];
+                for p in self.ptr[i]..self.ptr[i + 1] {
+                    let j = self.col[p] as usize;
+                    let xj = if j >= i0 && j < i1 {
+                        xc[j - i0]
+                    } else {
+                        old[j]
+                    };
+                    v += self.w[p] * xj;
+                }
+                xc[t] = v / self.d[i];
+            };
+            if reverse {
+                for t in (0..i1 - i0).rev() {
+                    update(t);
+                }
+            } else {
+                for t in 0..i1 - i0 {
+                    update(t);
+                }
+            }
+        });
+    }
 }
 
 impl Multigrid {
     /// Builds the hierarchy below the fine operator `fine` (moved in).
     pub fn new(fine: Stencil) -> Self {
-        let mut ops = vec![fine];
+        let mut maps = Vec::new();
+        let mut levels: Vec<Graph> = Vec::new();
+        let (m, g) = coarsen(&fine);
+        maps.push(m);
+        levels.push(g);
         loop {
-            let st = ops.last().expect("non-empty");
-            if st.ny * st.nx <= COARSEST_CELLS || (st.ny == 1 && st.nx == 1) {
+            let g = levels.last().expect("non-empty");
+            if g.n <= COARSEST || levels.len() >= MAX_LEVELS {
                 break;
             }
-            let c = coarsen(st);
-            ops.push(c);
+            let (m, c) = coarsen(g);
+            maps.push(m);
+            levels.push(c);
         }
-        // The finest level works in the caller's vectors; buffers for the coarse ones.
-        let bufs = ops[1..]
+        let bufs = levels
             .iter()
-            .map(|st| {
-                let n = st.ny * st.nx;
+            .map(|g| {
+                let n = g.n;
                 Buffers {
                     x: vec![0.0; n],
                     b: vec![0.0; n],
@@ -78,84 +426,72 @@ impl Multigrid {
                     v1: vec![0.0; n],
                     c2: vec![0.0; n],
                     v2: vec![0.0; n],
+                    old: vec![0.0; n],
                 }
             })
             .collect();
-        let coarse = BandCholesky::new(ops.last().expect("non-empty"));
+        let coarse = DenseCholesky::new(levels.last().expect("non-empty"));
         Multigrid {
-            ops,
+            fine,
+            maps,
+            levels,
             bufs: Mutex::new(bufs),
             coarse,
-            sweeps: 1,
         }
     }
 
     /// The finest operator.
     pub fn fine(&self) -> &Stencil {
-        &self.ops[0]
+        &self.fine
     }
 
-    /// Number of levels.
+    /// Unknowns per coarse level.
+    pub fn sizes(&self) -> Vec<usize> {
+        self.levels.iter().map(|g| g.n).collect()
+    }
+
+    /// The finest operator, the hierarchy dropped.
+    pub fn into_fine(self) -> Stencil {
+        self.fine
+    }
+
+    /// Number of levels, the finest included.
     pub fn n_levels(&self) -> usize {
-        self.ops.len()
+        self.levels.len() + 1
     }
 
-    /// `z = M⁻¹ r`: one symmetric V-cycle from `z = 0`; `work` has the fine level's size.
+    /// `z = M⁻¹ r`: one symmetric cycle from `z = 0`; `work` has the fine level's size.
     pub fn apply(&self, r: &[f64], z: &mut [f64], work: &mut [f64]) {
         let mut bufs = self.bufs.lock().unwrap_or_else(|e| e.into_inner());
-        if self.ops.len() == 1 {
-            self.coarse.solve(r, z);
-            return;
-        }
-        cycle(&self.ops, &mut bufs, &self.coarse, self.sweeps, r, z, work);
+        let st = &self.fine;
+        z.par_iter_mut().for_each(|v| *v = 0.0);
+        sweep(st, r, z, 0, false);
+        sweep(st, r, z, 1, false);
+        st.residual(z, r, work);
+        let (here, rest) = bufs.split_first_mut().expect("a coarse level");
+        restrict(&self.maps[0].members, work, &mut here.b);
+        kcycle(&self.levels, &self.maps[1..], here, rest, &self.coarse);
+        prolong_add(&self.maps[0].agg, &here.x, z);
+        sweep(st, r, z, 1, true);
+        sweep(st, r, z, 0, true);
     }
 }
 
-/// One cycle on `ops[0]` for right-hand side `b` into `x`, `r` a work vector; the coarser
-/// levels use `bufs` (one per level below).
-#[allow(clippy::too_many_arguments)]
-fn cycle(
-    ops: &[Stencil],
-    bufs: &mut [Buffers],
-    coarse: &BandCholesky,
-    sweeps: usize,
-    b: &[f64],
-    x: &mut [f64],
-    r: &mut [f64],
-) {
-    let st = &ops[0];
-    x.iter_mut().for_each(|v| *v = 0.0);
-    for _ in 0..sweeps {
-        sweep(st, b, x, 0, false);
-        sweep(st, b, x, 1, false);
-    }
-    st.residual(x, b, r);
-    let (below, rest) = bufs.split_first_mut().expect("a coarser level");
-    restrict(st, r, &ops[1], &mut below.b);
-    coarse_solve(&ops[1..], below, rest, coarse, sweeps);
-    prolong_add(st, &below.x, ops[1].nx, x);
-    for _ in 0..sweeps {
-        sweep(st, b, x, 1, true);
-        sweep(st, b, x, 0, true);
-    }
-}
-
-/// Approximate solve of a coarse level `ops[0] x = b` (in `here`): exact on the coarsest,
-/// else two steps of Krylov acceleration of the next cycle (the K-cycle of Notay and
-/// Vassilevski), which keeps plain aggregation's convergence independent of the number of
-/// levels. The second step is skipped when the first one reduced the residual 4-fold.
-fn coarse_solve(
-    ops: &[Stencil],
+/// Approximate solve of `levels[0] x = b` (in `here`): exact on the coarsest, else two steps
+/// of Krylov acceleration of the next cycle (the K-cycle), the second skipped when the first
+/// reduced the residual 4-fold.
+fn kcycle(
+    levels: &[Graph],
+    maps: &[Map],
     here: &mut Buffers,
     rest: &mut [Buffers],
-    coarse: &BandCholesky,
-    sweeps: usize,
+    coarse: &DenseCholesky,
 ) {
-    if ops.len() == 1 {
+    if levels.len() == 1 {
         coarse.solve(&here.b, &mut here.x);
         return;
     }
-    let st = &ops[0];
+    let g = &levels[0];
     let Buffers {
         x,
         b,
@@ -164,9 +500,10 @@ fn coarse_solve(
         v1,
         c2,
         v2,
+        old,
     } = here;
-    cycle(ops, rest, coarse, sweeps, b, c1, r);
-    st.apply(c1, v1);
+    cycle(levels, maps, rest, coarse, b, c1, r, old);
+    g.apply(c1, v1);
     let rho1 = dot(c1, v1);
     let alpha1 = dot(c1, b);
     if rho1.is_nan() || rho1 <= 0.0 {
@@ -174,7 +511,6 @@ fn coarse_solve(
         return;
     }
     let t1 = alpha1 / rho1;
-    // r = b − t1 v1
     r.par_chunks_mut(CHUNK)
         .zip(b.par_chunks(CHUNK).zip(v1.par_chunks(CHUNK)))
         .for_each(|(rc, (bc, vc))| {
@@ -191,8 +527,8 @@ fn coarse_solve(
         return;
     }
     // The second cycle's own residual buffer: x is free until the combination below.
-    cycle(ops, rest, coarse, sweeps, r, c2, x);
-    st.apply(c2, v2);
+    cycle(levels, maps, rest, coarse, r, c2, x, old);
+    g.apply(c2, v2);
     let gamma = dot(c2, v1);
     let beta = dot(c2, v2);
     let alpha2 = dot(c2, r);
@@ -211,14 +547,65 @@ fn coarse_solve(
         });
 }
 
+/// One symmetric cycle on `levels[0]` for `b` into `x` (`r`, `old` work vectors); the
+/// coarser levels use `bufs`.
+#[allow(clippy::too_many_arguments)]
+fn cycle(
+    levels: &[Graph],
+    maps: &[Map],
+    bufs: &mut [Buffers],
+    coarse: &DenseCholesky,
+    b: &[f64],
+    x: &mut [f64],
+    r: &mut [f64],
+    old: &mut [f64],
+) {
+    let g = &levels[0];
+    x.iter_mut().for_each(|v| *v = 0.0);
+    g.smooth(b, x, old, false);
+    g.residual(x, b, r);
+    let (below, rest) = bufs.split_first_mut().expect("a coarser level");
+    restrict(&maps[0].members, r, &mut below.b);
+    kcycle(&levels[1..], &maps[1..], below, rest, coarse);
+    prolong_add(&maps[0].agg, &below.x, x);
+    g.smooth(b, x, old, true);
+}
+
+/// Coarse right-hand side: sums of the fine residuals over each aggregate, in cell order.
+fn restrict(mem: &Members, r: &[f64], b: &mut [f64]) {
+    b.par_chunks_mut(CHUNK).enumerate().for_each(|(blk, bc)| {
+        for (t, bv) in bc.iter_mut().enumerate() {
+            let ci = blk * CHUNK + t;
+            *bv = mem.list[mem.ptr[ci]..mem.ptr[ci + 1]]
+                .iter()
+                .map(|&m| r[m as usize])
+                .sum();
+        }
+    });
+}
+
+/// `x += P x_c` on the unknowns.
+fn prolong_add(agg: &[u32], xc: &[f64], x: &mut [f64]) {
+    x.par_chunks_mut(CHUNK)
+        .zip(agg.par_chunks(CHUNK))
+        .for_each(|(xs, ags)| {
+            for (v, &a) in xs.iter_mut().zip(ags) {
+                if a != NONE {
+                    *v += xc[a as usize];
+                }
+            }
+        });
+}
+
 #[derive(Clone, Copy)]
 struct SharedMut(*mut f64);
 // SAFETY: see `sweep`: concurrent tasks never touch the same element while one writes it.
 unsafe impl Send for SharedMut {}
 unsafe impl Sync for SharedMut {}
 
-/// One Gauss–Seidel half-sweep over the cells with `(i + j) % 2 == colour`, in row order and,
-/// with `reverse`, from the last column to the first.
+/// One Gauss–Seidel half-sweep of the fine stencil over the cells with
+/// `(i + j) % 2 == colour`, in row order and, with `reverse`, from the last column to the
+/// first.
 fn sweep(st: &Stencil, b: &[f64], x: &mut [f64], colour: usize, reverse: bool) {
     let (ny, nx) = (st.ny, st.nx);
     assert_eq!(x.len(), ny * nx);
@@ -269,154 +656,57 @@ fn sweep(st: &Stencil, b: &[f64], x: &mut [f64], colour: usize, reverse: bool) {
         });
 }
 
-/// Galerkin coarse operator `Pᵀ A P` of 2 × 2 aggregates.
-pub fn coarsen(f: &Stencil) -> Stencil {
-    let (ny, nx) = (f.ny, f.nx);
-    let (cy, cx) = (ny.div_ceil(2), nx.div_ceil(2));
-    let n = cy * cx;
-    let mut e = vec![0.0; n];
-    let mut s = vec![0.0; n];
-    let mut dir = vec![0.0; n];
-    let periodic = f.periodic && cx > 1;
-    e.par_chunks_mut(cx)
-        .zip(s.par_chunks_mut(cx).zip(dir.par_chunks_mut(cx)))
-        .enumerate()
-        .for_each(|(ci, (erow, (srow, drow)))| {
-            let rows = 2 * ci..(2 * ci + 2).min(ny);
-            let last_row = rows.end - 1;
-            for cj in 0..cx {
-                let cols = 2 * cj..(2 * cj + 2).min(nx);
-                let last_col = cols.end - 1;
-                let mut sum_dir = 0.0;
-                for i in rows.clone() {
-                    for j in cols.clone() {
-                        if f.active[i * nx + j] {
-                            sum_dir += f.dir[i * nx + j];
-                        }
-                    }
-                }
-                drow[cj] = sum_dir;
-                // The fine e of the aggregate's last column crosses to the next aggregate
-                // (through the wrap on the last one when periodic).
-                if cj + 1 < cx || periodic {
-                    erow[cj] = rows.clone().map(|i| f.e[i * nx + last_col]).sum();
-                }
-                if ci + 1 < cy {
-                    srow[cj] = cols.clone().map(|j| f.s[last_row * nx + j]).sum();
-                }
-            }
-        });
-    let mut st = Stencil {
-        ny: cy,
-        nx: cx,
-        periodic,
-        e,
-        s,
-        dir,
-        d: vec![0.0; n],
-        active: vec![false; n],
-    };
-    st.finish_diagonal();
-    st
-}
-
-/// Coarse right-hand side: sums of the fine residuals over each aggregate.
-fn restrict(f: &Stencil, r: &[f64], c: &Stencil, b: &mut [f64]) {
-    let (ny, nx, cx) = (f.ny, f.nx, c.nx);
-    b.par_chunks_mut(cx)
-        .enumerate()
-        .with_min_len(ROWS_PER_TASK / 2)
-        .for_each(|(ci, brow)| {
-            brow.iter_mut().for_each(|v| *v = 0.0);
-            for i in 2 * ci..(2 * ci + 2).min(ny) {
-                for j in 0..nx {
-                    brow[j / 2] += r[i * nx + j];
-                }
-            }
-        });
-}
-
-/// `x += P x_c` on the cells with unknowns.
-fn prolong_add(f: &Stencil, xc: &[f64], cx: usize, x: &mut [f64]) {
-    let nx = f.nx;
-    x.par_chunks_mut(nx)
-        .enumerate()
-        .with_min_len(ROWS_PER_TASK)
-        .for_each(|(i, row)| {
-            let crow = &xc[(i / 2) * cx..(i / 2 + 1) * cx];
-            let arow = &f.active[i * nx..(i + 1) * nx];
-            for j in 0..nx {
-                if arow[j] {
-                    row[j] += crow[j / 2];
-                }
-            }
-        });
-}
-
-/// Banded Cholesky factor of a small stencil operator (raster order, half-bandwidth `nx`).
-struct BandCholesky {
+/// Dense Cholesky factor of the coarsest level (at most a few hundred unknowns).
+struct DenseCholesky {
     n: usize,
-    bw: usize,
-    /// Row k holds `L[k][k − t]` at `l[k (bw + 1) + t]`, t = 0..=bw.
+    /// Lower triangle, row-major `n × n`.
     l: Vec<f64>,
 }
 
-impl BandCholesky {
-    fn new(st: &Stencil) -> Self {
-        let (ny, nx) = (st.ny, st.nx);
-        let n = ny * nx;
-        let bw = nx.min(n.saturating_sub(1));
-        let w = bw + 1;
-        let mut l = vec![0.0; n * w];
-        for i in 0..ny {
-            for j in 0..nx {
-                let k = i * nx + j;
-                l[k * w] = st.d[k];
-                if j > 0 {
-                    l[k * w + 1] -= st.e[k - 1];
-                }
-                if st.periodic && nx > 1 && j == nx - 1 {
-                    l[k * w + (nx - 1)] -= st.e[k];
-                }
-                if i > 0 {
-                    l[k * w + nx] -= st.s[k - nx];
-                }
+impl DenseCholesky {
+    fn new(g: &Graph) -> Self {
+        let n = g.n;
+        let mut l = vec![0.0; n * n];
+        for i in 0..n {
+            l[i * n + i] = g.d[i];
+            for p in g.ptr[i]..g.ptr[i + 1] {
+                let j = g.col[p] as usize;
+                l[i * n + j] -= g.w[p];
             }
         }
         for k in 0..n {
-            for m in k.saturating_sub(bw)..=k {
-                let lo = k.saturating_sub(bw).max(m.saturating_sub(bw));
-                let mut v = l[k * w + (k - m)];
-                for p in lo..m {
-                    v -= l[k * w + (k - p)] * l[m * w + (m - p)];
+            for m in 0..=k {
+                let mut v = l[k * n + m];
+                for p in 0..m {
+                    v -= l[k * n + p] * l[m * n + p];
                 }
                 if m == k {
                     // SPD by construction; guard against round-off on a tiny pivot.
-                    l[k * w] = v.max(f64::MIN_POSITIVE).sqrt();
+                    l[k * n + k] = v.max(f64::MIN_POSITIVE).sqrt();
                 } else {
-                    l[k * w + (k - m)] = v / l[m * w];
+                    l[k * n + m] = v / l[m * n + m];
                 }
             }
         }
-        BandCholesky { n, bw, l }
+        DenseCholesky { n, l }
     }
 
     #[allow(clippy::needless_range_loop)]
     fn solve(&self, b: &[f64], x: &mut [f64]) {
-        let (n, bw, w) = (self.n, self.bw, self.bw + 1);
+        let n = self.n;
         for k in 0..n {
             let mut v = b[k];
-            for p in k.saturating_sub(bw)..k {
-                v -= self.l[k * w + (k - p)] * x[p];
+            for p in 0..k {
+                v -= self.l[k * n + p] * x[p];
             }
-            x[k] = v / self.l[k * w];
+            x[k] = v / self.l[k * n + k];
         }
         for k in (0..n).rev() {
             let mut v = x[k];
-            for q in k + 1..(k + bw + 1).min(n) {
-                v -= self.l[q * w + (q - k)] * x[q];
+            for q in k + 1..n {
+                v -= self.l[q * n + k] * x[q];
             }
-            x[k] = v / self.l[k * w];
+            x[k] = v / self.l[k * n + k];
         }
     }
 }
