@@ -7,7 +7,7 @@ import json
 import math
 import os
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
@@ -106,7 +106,7 @@ def threshold_from_rows(rows: Sequence[Mapping[str, Any]], axis: Any = 0) -> dic
 # ============================================================================ tasks
 
 
-@dataclass(eq=False)
+@dataclass(frozen=True, eq=False)
 class EnsembleResult:
     """Aggregated ensemble (see the module docstring for the files and definitions).
 
@@ -336,7 +336,7 @@ def aggregate(
     if figures:
         from ..plotting.ensemble import save_ensemble_figures
 
-        result.figures = save_ensemble_figures(result)
+        result = replace(result, figures=save_ensemble_figures(result))
     doc = {
         "format": _FORMAT,
         "kind": "leakpath-ensemble-summary",
