@@ -10,6 +10,7 @@ use pyo3::types::PyDict;
 
 use super::{check_positive, to_py};
 use crate::alloc;
+use crate::contact::multilevel::CoarseCost;
 use crate::contact::{ContactProblem as Problem, Control, SolveOptions, Solver, Start};
 use crate::error::Error;
 use crate::grid::Boundary;
@@ -21,6 +22,19 @@ fn field<'py>(
     nx: usize,
 ) -> PyResult<Bound<'py, PyArray2<f64>>> {
     PyArray1::from_vec(py, v).reshape([ny, nx])
+}
+
+/// The coarse-to-fine start's cost as `coarse_*` entries of a result dict.
+pub(super) fn set_coarse(d: &Bound<'_, PyDict>, c: &CoarseCost) -> PyResult<()> {
+    d.set_item("coarse_levels", c.levels)?;
+    d.set_item("coarse_iterations", c.iterations)?;
+    d.set_item("coarse_applies", c.applies)?;
+    d.set_item("coarse_preconditioner_applies", c.preconditioner_applies)?;
+    d.set_item("coarse_applies_fine_equivalent", c.applies_fine_equivalent)?;
+    d.set_item(
+        "coarse_preconditioner_fine_equivalent",
+        c.preconditioner_fine_equivalent,
+    )
 }
 
 pub(super) fn boundary_from(name: &str) -> PyResult<Boundary> {
@@ -287,16 +301,7 @@ impl ContactProblem {
         d.set_item("iterations", sol.iterations)?;
         d.set_item("applies", sol.applies)?;
         d.set_item("preconditioner_applies", sol.preconditioner_applies)?;
-        let c = sol.coarse;
-        d.set_item("coarse_levels", c.levels)?;
-        d.set_item("coarse_iterations", c.iterations)?;
-        d.set_item("coarse_applies", c.applies)?;
-        d.set_item("coarse_preconditioner_applies", c.preconditioner_applies)?;
-        d.set_item("coarse_applies_fine_equivalent", c.applies_fine_equivalent)?;
-        d.set_item(
-            "coarse_preconditioner_fine_equivalent",
-            c.preconditioner_fine_equivalent,
-        )?;
+        set_coarse(&d, &sol.coarse)?;
         d.set_item("kkt", sol.kkt)?;
         d.set_item("contact_points", sol.contact_points)?;
         d.set_item("seconds", seconds)?;
@@ -462,16 +467,7 @@ pub(crate) mod pk_py {
         d.set_item("iterations", sol.iterations)?;
         d.set_item("applies", sol.applies)?;
         d.set_item("preconditioner_applies", sol.preconditioner_applies)?;
-        let c = sol.coarse;
-        d.set_item("coarse_levels", c.levels)?;
-        d.set_item("coarse_iterations", c.iterations)?;
-        d.set_item("coarse_applies", c.applies)?;
-        d.set_item("coarse_preconditioner_applies", c.preconditioner_applies)?;
-        d.set_item("coarse_applies_fine_equivalent", c.applies_fine_equivalent)?;
-        d.set_item(
-            "coarse_preconditioner_fine_equivalent",
-            c.preconditioner_fine_equivalent,
-        )?;
+        super::set_coarse(&d, &sol.coarse)?;
         d.set_item("kkt", sol.kkt)?;
         d.set_item("load", sol.load)?;
         d.set_item("mean_pressure", sol.mean_pressure)?;
