@@ -14,13 +14,12 @@ AUTO_ACTIVE_SET_MAX_POINTS: int
 
 _F64 = npt.NDArray[np.float64]
 
-class ContactResult(_TypedDict):
-    """One contact solve, whichever solver ran. The same field has the same name in every
+class _SolveFields(_TypedDict):
+    """The fields every contact solve returns. The same field has the same name in every
     result: ``contact_points`` is ``#(p > 0)``, ``applies`` the FFT products. ``coarse_*``: the
     coarse-to-fine start of a cold Polonsky–Keer solve (raw counts on the coarse grids, and
     their sum weighted by each grid's share of the points); zero otherwise."""
 
-    solver: _Literal["polonsky-keer", "active-set", "lawson-hanson"]
     pressure: _F64
     displacement: _F64
     gap: _F64
@@ -38,28 +37,16 @@ class ContactResult(_TypedDict):
     contact_points: int
     seconds: float
 
-class PolonskyKeerResult(_TypedDict):
-    """:func:`solve_polonsky_keer`: the fields of :class:`ContactResult` (no ``solver``) plus
-    the load."""
+class ContactResult(_SolveFields):
+    """One contact solve, whichever solver ran: the common fields and the solver that ran."""
 
-    pressure: _F64
-    displacement: _F64
-    gap: _F64
-    approach: float
-    iterations: int
-    applies: int
-    preconditioner_applies: int
-    coarse_levels: int
-    coarse_iterations: int
-    coarse_applies: int
-    coarse_preconditioner_applies: int
-    coarse_applies_fine_equivalent: float
-    coarse_preconditioner_fine_equivalent: float
-    kkt: float
+    solver: _Literal["polonsky-keer", "active-set", "lawson-hanson"]
+
+class PolonskyKeerResult(_SolveFields):
+    """:func:`solve_polonsky_keer`: the common fields plus the load."""
+
     load: float
     mean_pressure: float
-    contact_points: int
-    seconds: float
 
 class ClusterResult(_TypedDict):
     """:func:`classify_clusters`."""
