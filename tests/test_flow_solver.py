@@ -87,3 +87,65 @@ def test_contact_gap_near_threshold_matches_spsolve(seed, solver):
         return
     assert f.flow_rate == pytest.approx(q, rel=1e-8)
     assert abs(f.inlet_flow_rate / f.flow_rate - 1) <= 1e-9
+
+
+def extended_oracle_rates(gap: np.ndarray, contact: np.ndarray) -> tuple[float, float]:
+    """Outlet and inlet rates of the same system by scipy's sparse LU with iterative
+    refinement whose residuals are summed in numpy's extended precision (``longdouble``):
+    the digits a double-precision factor loses when ``g³`` spans many decades come back."""
+    c = np.where(contact, 0.0, gap**3 / 12.0)
+    lab, _ = ndimage.label(c > 0)
+    span = np.intersect1d(lab[0][lab[0] > 0], lab[-1][lab[-1] > 0])
+    cells = np.isin(lab, span)
+    idx = -np.ones(gap.shape, dtype=np.int64)
+    m = int(cells.sum())
+    idx[cells] = np.arange(m)
+    rows, cols, vals = [], [], []
+    diag = np.zeros(gap.shape)
+    for a, b, ca, cb, sa, sb in (
+        (idx[:-1], idx[1:], c[:-1], c[1:], np.s_[:-1], np.s_[1:]),
+        (idx[:, :-1], idx[:, 1:], c[:, :-1], c[:, 1:], np.s_[:, :-1], np.s_[:, 1:]),
+    ):
+        ok = (a >= 0) & (b >= 0)
+        cf = np.zeros(a.shape)
+        cf[ok] = 2 * ca[ok] * cb[ok] / (ca[ok] + cb[ok])
+        rows += [a[ok], b[ok]]
+        cols += [b[ok], a[ok]]
+        vals += [-cf[ok], -cf[ok]]
+        diag[sa] += cf
+        diag[sb] += cf
+    diag[0] += 2 * c[0]
+    diag[-1] += 2 * c[-1]
+    rows.append(idx[cells])
+    cols.append(idx[cells])
+    vals.append(diag[cells])
+    a = sp.coo_matrix(
+        (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(m, m)
+    )
+    lu = spla.splu(a.tocsc())
+    b_in = np.where(np.arange(gap.shape[0])[:, None] == 0, 2 * c, 0.0)[cells]
+    b_out = np.where(np.arange(gap.shape[0])[:, None] == gap.shape[0] - 1, 2 * c, 0.0)[cells]
+    ld = np.longdouble
+    data = a.data.astype(ld)
+
+    def solve(b):
+        x = lu.solve(b).astype(ld)
+        for _ in range(6):
+            ax = np.zeros(m, ld)
+            np.add.at(ax, a.row, data * x[a.col])
+            x += lu.solve(np.asarray(b.astype(ld) - ax, dtype=float)).astype(ld)
+        return x
+
+    phi, psi = solve(b_in), solve(b_out)
+    return float(np.sum(b_out.astype(ld) * phi)), float(np.sum(b_in.astype(ld) * psi))
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_default_rates_match_an_extended_precision_oracle(seed):
+    gap, contact = near_threshold_gap(seed)
+    q_out, q_in = extended_oracle_rates(gap, contact)
+    assert q_out == pytest.approx(q_in, rel=1e-11)
+    f = leakpath.flow(gap, dx=1.0, contact=contact)
+    assert f.solver == "cholesky"
+    assert f.flow_rate == pytest.approx(q_out, rel=1e-11)
+    assert f.inlet_flow_rate == pytest.approx(q_out, rel=1e-11)

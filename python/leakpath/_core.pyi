@@ -83,6 +83,7 @@ class FlowResult(_TypedDict):
     iterations: int
     n_unknowns: int
     levels: int
+    solver: str
     seconds: float
 
 def kernel_table(
@@ -256,16 +257,18 @@ def solve_reynolds_flow(
     Cell-centred finite volumes, harmonic-mean faces, reservoirs at ``pressure_drop`` (inlet,
     before the first index along ``axis``) and 0 (outlet) half a cell from the boundary
     cells; no-flux side walls, or wrap across the flow with ``periodic``. Closed cells:
-    ``contact`` where given, else ``gap ≤ 0``. ``solver``: "cholesky" (sparse Cholesky, two
-    refinement steps), "multigrid" (conjugate gradients with an aggregation multigrid
-    preconditioner to ``‖b − Ax‖/‖b‖ ≤ tol`` and ``|Q_in − Q_out| ≤ tol·|Q_out|`` unless
-    round-off stalls it first) or "auto" (Cholesky up to 4 million unknowns). Returns a
+    ``contact`` where given, else ``gap ≤ 0``. ``solver``: "cholesky" (sparse Cholesky, refined
+    with double-double residuals), "multigrid" (conjugate gradients with an aggregation
+    multigrid preconditioner to ``‖b − Ax‖/‖b‖ ≤ tol`` and ``|Q_in − Q_out| ≤ tol·|Q_out|``
+    unless round-off stalls it first) or "auto" (Cholesky whenever its factor fits in
+    ``memory_limit`` and the available memory, multigrid otherwise). Returns a
     dict: ``pressure`` (ny, nx; NaN on closed cells and on clusters joined to no
     reservoir), ``flux_axis0`` (ny + 1, nx),
     ``flux_axis1`` (ny, nx + 1) (volume per time through each face, positive towards
     increasing index), ``flow_rate`` (outlet), ``inlet_flow_rate``, ``conductance``
     (``Q/Δp``), ``residual``, ``conservation`` (largest net cell flux / Q), ``iterations``,
-    ``n_unknowns``, ``levels``, ``seconds``. ``InvalidArgumentError`` for bad input,
+    ``n_unknowns``, ``levels``, ``solver`` (the one that ran: "cholesky", "multigrid" or
+    "none" when nothing spans), ``seconds``. ``InvalidArgumentError`` for bad input,
     ``NotConvergedError`` past ``max_iter`` (default 20000), ``ProblemTooLargeError`` above
     ``memory_limit`` bytes. The GIL is released; Ctrl-C raises ``KeyboardInterrupt``.
     """

@@ -73,6 +73,8 @@ class Flow:
         residual: final relative residual ``‖b − Ax‖₂/‖b‖₂`` of the linear system.
         conservation: largest net volume flux out of a cell relative to ``Q`` (0 if ``Q = 0``).
         iterations: conjugate-gradient iterations (0 for the Cholesky solve).
+        solver: the linear solver that ran: ``"cholesky"``, ``"multigrid"``, or ``"none"``
+            when nothing spans.
         n_unknowns: cells carrying an unknown pressure (those of the spanning clusters).
         axis, viscosity, pressure_drop, periodic, dx: the inputs.
         seconds: wall time of the solve.
@@ -98,6 +100,7 @@ class Flow:
     conservation: float
     iterations: int
     n_unknowns: int
+    solver: str
     axis: int
     viscosity: float
     pressure_drop: float
@@ -194,11 +197,12 @@ def flow(
         tol: relative residual ``‖b − Ax‖₂/‖b‖₂`` (default 1e-12).
         max_iter: conjugate-gradient iterations allowed (default 20000).
         memory_limit: bytes allowed (default 70 % of physical memory).
-        solver: ``"cholesky"`` (sparse Cholesky with two refinement steps: exact to
+        solver: ``"cholesky"`` (sparse Cholesky, refined with double-double residuals: exact to
             round-off even for the near-threshold gaps where iterations stall),
             ``"multigrid"`` (conjugate gradients, aggregation-multigrid preconditioner, to
-            ``tol``), or ``"auto"`` (default: Cholesky up to 4 million cells with unknowns,
-            multigrid above).
+            ``tol``), or ``"auto"`` (default: Cholesky whenever its factor, whose exact size
+            is known after the symbolic analysis, fits in ``memory_limit`` and the available
+            memory; multigrid otherwise).
         gas: isothermal ideal gas instead of an incompressible liquid (module docstring);
             needs ``inlet_pressure`` and ``outlet_pressure`` (absolute, ``≥ 0``),
             ``gas_constant`` ``R_s`` (specific, e.g. 287.05 J/(kg K) for air) and
@@ -393,6 +397,7 @@ def flow(
         conservation=float(res["conservation"]),
         iterations=int(res["iterations"]),
         n_unknowns=int(res["n_unknowns"]),
+        solver=str(res["solver"]),
         axis=axis,
         viscosity=eta,
         pressure_drop=dp,

@@ -1,18 +1,49 @@
-//! Sparse Cholesky solve of the Reynolds system on the cells with unknowns (faer, AMD
-//! ordering, supernodal, one thread so the bits do not depend on the thread count).
+//! Sparse Cholesky solve of the Reynolds system on the cells with unknowns (faer,
+//! supernodal, one thread for the numbers so the bits do not depend on the thread count).
 //!
 //! The gaps of a contact close continuously at the contact edges, so `g³` spans fifteen
 //! orders of magnitude and the flow near the percolation threshold passes through necks whose
 //! conductance is that small: conjugate gradients then stall far from the answer in double
 //! precision, while the factorisation is exact to round-off.
+//!
+//! # Ordering
+//!
+//! The fill-reducing order is approximate minimum degree (faer's AMD) on pieces of the grid:
+//! the grid is cut in two by its middle row (or, without wrap and wider than tall, its
+//! middle column), each half cut again ([`SPLIT_DEPTH`] times, pieces of at least
+//! [`SPLIT_MIN`] cells); the pieces are ordered independently, in parallel, and the
+//! separators come last. A separator couples only the two pieces it divides, so the order
+//! does not depend on the thread count. The minimum-degree step is the costliest part of the
+//! analysis on large grids; this puts every core on it for a little more fill.
+//!
+//! # Memory
+//!
+//! The factor's size is known exactly once the symbolic analysis is done, before any value
+//! is computed: [`Factor::new`] refuses with [`Error::TooLarge`] there, so a caller can fall
+//! back to an iterative solver without having allocated the factor.
 
 use faer::dyn_stack::{MemBuffer, MemStack};
-use faer::sparse::linalg::cholesky::{factorize_symbolic_cholesky, SymmetricOrdering};
-use faer::sparse::{SparseColMat, Triplet};
+use faer::sparse::linalg::cholesky::{
+    factorize_symbolic_cholesky, LltRef, SymbolicCholesky, SymmetricOrdering,
+};
+use faer::sparse::{SparseColMat, SymbolicSparseColMat, SymbolicSparseColMatRef};
 use faer::{Conj, Mat, Par, Side};
 
 use super::assemble::Stencil;
+use super::cg;
 use crate::error::{Error, Result};
+
+/// Times the grid is halved for the ordering (up to `2^SPLIT_DEPTH` pieces).
+const SPLIT_DEPTH: usize = 1;
+
+/// Pieces with fewer cells than this are not cut further.
+const SPLIT_MIN: usize = 1 << 16;
+
+/// Iterative-refinement steps at most per right-hand side.
+const REFINE: usize = 4;
+
+/// Refinement stops once the relative residual is at or below this.
+const REFINED: f64 = 1e-15;
 
 fn failed(what: impl std::fmt::Display) -> Error {
     Error::NotConverged {
@@ -22,35 +53,177 @@ fn failed(what: impl std::fmt::Display) -> Error {
     }
 }
 
-/// Solves `A x_c = b_c` for every right-hand side `b_c` of `rhs` on the active cells of `st`
-/// (others get 0) with one factor, `refine` steps of iterative refinement each.
-pub fn solve(st: &Stencil, rhs: &[&[f64]], xs: &mut [Vec<f64>], refine: usize) -> Result<()> {
-    let (ny, nx) = (st.ny, st.nx);
-    let n = ny * nx;
-    let mut index = vec![usize::MAX; n];
-    let mut cells = Vec::new();
-    for (k, slot) in index.iter_mut().enumerate() {
-        if st.active[k] {
-            *slot = cells.len();
-            cells.push(k);
+/// The Cholesky factor of the operator on its active cells.
+pub struct Factor {
+    /// Grid cell of each unknown (cell order).
+    cells: Vec<usize>,
+    symbolic: SymbolicCholesky<usize>,
+    values: Vec<f64>,
+    /// Scratch of one solve.
+    solve_buf: MemBuffer,
+}
+
+/// Bytes of the values of a factor with `entries` entries, its numeric scratch `scratch`
+/// and the symbolic structure (an index per entry at most).
+fn factor_bytes(entries: usize, scratch: usize) -> u64 {
+    16 * entries as u64 + scratch as u64
+}
+
+impl Factor {
+    /// Orders, analyses and factors `st` on its active cells. With `memory_limit`, refuses
+    /// with [`Error::TooLarge`] after the symbolic analysis when the factor would need more.
+    pub fn new(st: &Stencil, memory_limit: Option<u64>) -> Result<Self> {
+        let (ny, nx) = (st.ny, st.nx);
+        let n = ny * nx;
+        let mut index = vec![usize::MAX; n];
+        let mut cells = Vec::new();
+        for (k, slot) in index.iter_mut().enumerate() {
+            if st.active[k] {
+                *slot = cells.len();
+                cells.push(k);
+            }
+        }
+        let m = cells.len();
+        let (col_ptr, row_idx, vals) = lower_csc(st, &index, &cells);
+        let pattern = SymbolicSparseColMat::new_checked(m, m, col_ptr, None, row_idx);
+        let a = SparseColMat::new(pattern, vals);
+        let fwd = ordering(st, &index, m);
+        let mut inv = vec![0usize; m];
+        for (new, &old) in fwd.iter().enumerate() {
+            inv[old] = new;
+        }
+        let perm = faer::perm::PermRef::new_checked(&fwd, &inv, m);
+        let symbolic = factorize_symbolic_cholesky(
+            a.symbolic(),
+            Side::Lower,
+            SymmetricOrdering::Custom(perm),
+            Default::default(),
+        )
+        .map_err(failed)?;
+        let par = Par::Seq;
+        let scratch = symbolic.factorize_numeric_llt_scratch::<f64>(par, Default::default());
+        let need = factor_bytes(symbolic.len_val(), scratch.size_bytes());
+        if let Some(limit) = memory_limit {
+            if need > limit {
+                return Err(Error::TooLarge {
+                    bytes: need,
+                    limit,
+                    what: format!("the sparse Cholesky factor of {m} flow unknowns"),
+                });
+            }
+        }
+        let mut values = Vec::new();
+        values
+            .try_reserve_exact(symbolic.len_val())
+            .map_err(|_| failed("out of memory"))?;
+        values.resize(symbolic.len_val(), 0.0);
+        {
+            let mut buf = MemBuffer::try_new(scratch).map_err(|_| failed("out of memory"))?;
+            symbolic
+                .factorize_numeric_llt::<f64>(
+                    &mut values,
+                    a.as_ref(),
+                    Side::Lower,
+                    Default::default(),
+                    par,
+                    MemStack::new(&mut buf),
+                    Default::default(),
+                )
+                .map_err(|e| failed(format!("{e:?}")))?;
+        }
+        let solve_buf = MemBuffer::try_new(symbolic.solve_in_place_scratch::<f64>(1, par))
+            .map_err(|_| failed("out of memory"))?;
+        Ok(Factor {
+            cells,
+            symbolic,
+            values,
+            solve_buf,
+        })
+    }
+
+    /// Entries of the factor.
+    pub fn entries(&self) -> usize {
+        self.values.len()
+    }
+
+    fn solve_cells(&mut self, b: &[f64], x: &mut [f64], add: bool) {
+        let m = self.cells.len();
+        let mut sol = Mat::<f64>::from_fn(m, 1, |r, _| b[self.cells[r]]);
+        let llt = LltRef::<'_, usize, f64>::new(&self.symbolic, &self.values);
+        llt.solve_in_place_with_conj(
+            Conj::No,
+            sol.as_mut(),
+            Par::Seq,
+            MemStack::new(&mut self.solve_buf),
+        );
+        for (r, &k) in self.cells.iter().enumerate() {
+            if add {
+                x[k] += sol[(r, 0)];
+            } else {
+                x[k] = sol[(r, 0)];
+            }
         }
     }
-    let m = cells.len();
-    for x in xs.iter_mut() {
+
+    /// `A x = b` on the active cells (0 elsewhere), refined against `st` with residuals in
+    /// double-double arithmetic ([`Stencil::residual_compensated`]) until the relative
+    /// residual is at most [`REFINED`] or [`REFINE`] steps were taken. Returns the relative
+    /// residual `‖b − A x‖₂ / ‖b‖₂`.
+    pub fn solve(&mut self, st: &Stencil, b: &[f64], x: &mut [f64]) -> f64 {
         x.iter_mut().for_each(|v| *v = 0.0);
+        let bnorm = cg::dot(b, b).sqrt();
+        if bnorm == 0.0 || self.cells.is_empty() {
+            return 0.0;
+        }
+        self.solve_cells(b, x, false);
+        let mut res = vec![0.0; b.len()];
+        // Stop at REFINED, after REFINE steps, or when a step no longer halves the residual
+        // (the factor's error is then as large as the correction: a condition number near
+        // 1/ε); a step that made it worse is undone.
+        let mut best = f64::INFINITY;
+        let mut best_x = x.to_vec();
+        for step in 0..=REFINE {
+            st.residual_compensated(x, b, &mut res);
+            let rel = cg::dot(&res, &res).sqrt() / bnorm;
+            if rel >= best {
+                x.copy_from_slice(&best_x);
+                break;
+            }
+            let slow = rel > 0.5 * best;
+            best = rel;
+            if rel <= REFINED || step == REFINE || slow {
+                break;
+            }
+            best_x.copy_from_slice(x);
+            self.solve_cells(&res, x, true);
+        }
+        best
     }
-    if m == 0 {
-        return Ok(());
-    }
-    // Lower triangle (row ≥ column) of the symmetric matrix.
-    let mut trip = Vec::with_capacity(3 * m);
-    for (r, &k) in cells.iter().enumerate() {
-        trip.push(Triplet::new(r, r, st.d[k]));
+}
+
+/// The lower triangle (row ≥ column) of the operator on the unknowns, by columns, rows
+/// ascending: each unknown's diagonal, then its neighbours of larger index.
+fn lower_csc(st: &Stencil, index: &[usize], cells: &[usize]) -> (Vec<usize>, Vec<usize>, Vec<f64>) {
+    let (ny, nx) = (st.ny, st.nx);
+    let m = cells.len();
+    let mut col_ptr = Vec::with_capacity(m + 1);
+    let mut row_idx = Vec::with_capacity(3 * m);
+    let mut vals = Vec::with_capacity(3 * m);
+    col_ptr.push(0);
+    for (q, &k) in cells.iter().enumerate() {
         let (i, j) = (k / nx, k % nx);
+        let mut below: [(usize, f64); 4] = [(usize::MAX, 0.0); 4];
+        let mut nb = 0;
         let mut push = |l: usize, c: f64| {
-            let q = index[l];
-            if c > 0.0 && q != usize::MAX && q < r {
-                trip.push(Triplet::new(r, q, -c));
+            let t = index[l];
+            if c > 0.0 && t != usize::MAX && t > q {
+                // The two faces of a 2-wide periodic row join the same pair: add them.
+                if let Some(e) = below[..nb].iter_mut().find(|e| e.0 == t) {
+                    e.1 -= c;
+                } else {
+                    below[nb] = (t, -c);
+                    nb += 1;
+                }
             }
         };
         if j > 0 {
@@ -69,54 +242,139 @@ pub fn solve(st: &Stencil, rhs: &[&[f64]], xs: &mut [Vec<f64>], refine: usize) -
         if i + 1 < ny {
             push(k + nx, st.s[k]);
         }
-    }
-    // Duplicates (the two faces of a 2-wide periodic row) are summed by the constructor.
-    let a = SparseColMat::<usize, f64>::try_new_from_triplets(m, m, &trip).map_err(failed)?;
-    drop(trip);
-    let sym = factorize_symbolic_cholesky(
-        a.symbolic(),
-        Side::Lower,
-        SymmetricOrdering::Amd,
-        Default::default(),
-    )
-    .map_err(failed)?;
-    let par = Par::Seq;
-    let mut values = Vec::new();
-    values
-        .try_reserve_exact(sym.len_val())
-        .map_err(|_| failed("out of memory"))?;
-    values.resize(sym.len_val(), 0.0);
-    let mut buf =
-        MemBuffer::try_new(sym.factorize_numeric_llt_scratch::<f64>(par, Default::default()))
-            .map_err(|_| failed("out of memory"))?;
-    let llt = sym
-        .factorize_numeric_llt::<f64>(
-            &mut values,
-            a.as_ref(),
-            Side::Lower,
-            Default::default(),
-            par,
-            MemStack::new(&mut buf),
-            Default::default(),
-        )
-        .map_err(|e| failed(format!("{e:?}")))?;
-    let mut sbuf = MemBuffer::try_new(sym.solve_in_place_scratch::<f64>(1, par))
-        .map_err(|_| failed("out of memory"))?;
-    let mut res = vec![0.0; n];
-    for (b, x) in rhs.iter().zip(xs.iter_mut()) {
-        let mut sol = Mat::<f64>::from_fn(m, 1, |r, _| b[cells[r]]);
-        llt.solve_in_place_with_conj(Conj::No, sol.as_mut(), par, MemStack::new(&mut sbuf));
-        for (r, &k) in cells.iter().enumerate() {
-            x[k] = sol[(r, 0)];
+        below[..nb].sort_unstable_by_key(|e| e.0);
+        row_idx.push(q);
+        vals.push(st.d[k]);
+        for &(t, v) in &below[..nb] {
+            row_idx.push(t);
+            vals.push(v);
         }
-        for _ in 0..refine {
-            st.residual(x, b, &mut res);
-            let mut corr = Mat::<f64>::from_fn(m, 1, |r, _| res[cells[r]]);
-            llt.solve_in_place_with_conj(Conj::No, corr.as_mut(), par, MemStack::new(&mut sbuf));
-            for (r, &k) in cells.iter().enumerate() {
-                x[k] += corr[(r, 0)];
+        col_ptr.push(row_idx.len());
+    }
+    (col_ptr, row_idx, vals)
+}
+
+/// Elimination order (new position → unknown) of the unknowns `index` (grid cell → unknown,
+/// `usize::MAX` for none); see the module docs.
+fn ordering(st: &Stencil, index: &[usize], m: usize) -> Vec<usize> {
+    let mut out = Vec::with_capacity(m);
+    region_order(st, index, (0, st.ny), (0, st.nx), SPLIT_DEPTH, &mut out);
+    out
+}
+
+fn region_order(
+    st: &Stencil,
+    index: &[usize],
+    r: (usize, usize),
+    c: (usize, usize),
+    depth: usize,
+    out: &mut Vec<usize>,
+) {
+    let (h, w) = (r.1 - r.0, c.1 - c.0);
+    if h == 0 || w == 0 {
+        return;
+    }
+    // With wrap, a column does not cut the cylinder: rows only.
+    let by_rows = (st.periodic && c == (0, st.nx)) || h >= w;
+    let long = if by_rows { h } else { w };
+    if depth == 0 || h * w < 2 * SPLIT_MIN || long < 3 {
+        amd_region(st, index, r, c, out);
+        return;
+    }
+    let (mut a, mut b) = (Vec::new(), Vec::new());
+    let nx = st.nx;
+    let sep: Vec<usize> = if by_rows {
+        let mid = r.0 + h / 2;
+        rayon::join(
+            || region_order(st, index, (r.0, mid), c, depth - 1, &mut a),
+            || region_order(st, index, (mid + 1, r.1), c, depth - 1, &mut b),
+        );
+        (c.0..c.1).map(|j| index[mid * nx + j]).collect()
+    } else {
+        let mid = c.0 + w / 2;
+        rayon::join(
+            || region_order(st, index, r, (c.0, mid), depth - 1, &mut a),
+            || region_order(st, index, r, (mid + 1, c.1), depth - 1, &mut b),
+        );
+        (r.0..r.1).map(|i| index[i * nx + mid]).collect()
+    };
+    out.extend(a);
+    out.extend(b);
+    out.extend(sep.into_iter().filter(|&q| q != usize::MAX));
+}
+
+/// Approximate-minimum-degree order of the unknowns in one rectangle of the grid (faces to
+/// cells outside it do not count: those cells are separators, eliminated later).
+fn amd_region(
+    st: &Stencil,
+    index: &[usize],
+    r: (usize, usize),
+    c: (usize, usize),
+    out: &mut Vec<usize>,
+) {
+    let nx = st.nx;
+    let w = c.1 - c.0;
+    let wrap = st.periodic && c == (0, nx) && nx > 2;
+    let mut local = vec![usize::MAX; (r.1 - r.0) * w];
+    let mut cells = Vec::new();
+    for i in r.0..r.1 {
+        for j in c.0..c.1 {
+            if index[i * nx + j] != usize::MAX {
+                local[(i - r.0) * w + (j - c.0)] = cells.len();
+                cells.push(i * nx + j);
             }
         }
     }
-    Ok(())
+    let n = cells.len();
+    if n == 0 {
+        return;
+    }
+    // Upper pattern (row < column) by columns: each unknown's neighbours of smaller local
+    // index, i.e. west and north, and for the last column its wrap partner in column 0.
+    let mut col_ptr = Vec::with_capacity(n + 1);
+    let mut row_idx = Vec::with_capacity(2 * n);
+    col_ptr.push(0usize);
+    for (q, &k) in cells.iter().enumerate() {
+        let (i, j) = (k / nx, k % nx);
+        let (li, lj) = (i - r.0, j - c.0);
+        let mut rows = [usize::MAX; 3];
+        if lj > 0 && st.e[k - 1] > 0.0 {
+            rows[0] = local[li * w + lj - 1];
+        }
+        if li > 0 && st.s[k - nx] > 0.0 {
+            rows[1] = local[(li - 1) * w + lj];
+        }
+        if wrap && j == nx - 1 && st.e[k] > 0.0 {
+            rows[2] = local[li * w];
+        }
+        rows.sort_unstable();
+        let mut last = usize::MAX;
+        for t in rows {
+            if t < q && t != last {
+                row_idx.push(t);
+                last = t;
+            }
+        }
+        col_ptr.push(row_idx.len());
+    }
+    let pattern = SymbolicSparseColMatRef::new_checked(n, n, &col_ptr, None, &row_idx);
+    let mut perm = vec![0usize; n];
+    let mut perm_inv = vec![0usize; n];
+    let req = faer::sparse::linalg::amd::order_scratch::<usize>(n, row_idx.len());
+    let ordered = MemBuffer::try_new(req).ok().and_then(|mut buf| {
+        faer::sparse::linalg::amd::order(
+            &mut perm,
+            &mut perm_inv,
+            pattern,
+            Default::default(),
+            MemStack::new(&mut buf),
+        )
+        .ok()
+    });
+    if ordered.is_some() {
+        out.extend(perm.iter().map(|&q| index[cells[q]]));
+    } else {
+        // Cell order: more fill, never a wrong answer.
+        out.extend(cells.iter().map(|&k| index[k]));
+    }
 }

@@ -28,10 +28,12 @@
 //!
 //! # Solver
 //!
-//! Conjugate gradients on the spanning cells, preconditioned by one V-cycle of aggregation
-//! multigrid ([`multigrid`]); the conductances are scaled by the largest open gap cubed so
-//! the system is dimensionless. All loops run on rayon, reductions in fixed chunks: the same
-//! bits for any thread count.
+//! The conductances are scaled by the largest open gap cubed so the system is dimensionless.
+//! By default ([`Solver::Auto`]) a sparse Cholesky factor ([`direct`]) whenever its exact
+//! size, known after the symbolic analysis, fits in memory: exact to round-off however
+//! widely the conductances spread, one factor for both right-hand sides. Otherwise conjugate
+//! gradients on the spanning cells, preconditioned by aggregation multigrid ([`multigrid`]).
+//! All loops run on rayon, reductions in fixed chunks: the same bits for any thread count.
 
 pub mod assemble;
 pub mod cg;
@@ -76,9 +78,9 @@ pub struct Problem<'a> {
 /// Which linear solver.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Solver {
-    /// Cholesky up to [`DIRECT_MAX_UNKNOWNS`] unknowns, multigrid above.
+    /// Cholesky when its factor fits in memory, multigrid otherwise.
     Auto,
-    /// Sparse Cholesky ([`direct`]), with two steps of iterative refinement.
+    /// Sparse Cholesky ([`direct`]), refined with double-double residuals.
     Cholesky,
     /// Conjugate gradients with the multigrid preconditioner ([`multigrid`]).
     Multigrid,
@@ -98,10 +100,6 @@ impl Solver {
         }
     }
 }
-
-/// `Solver::Auto` factors systems up to this many unknowns (the factor of a 2-D grid with
-/// AMD ordering holds some tens of entries per unknown).
-pub const DIRECT_MAX_UNKNOWNS: usize = 4_000_000;
 
 /// Solver settings.
 pub struct Options<'a> {
@@ -155,9 +153,9 @@ pub struct Solution {
     pub iterations: usize,
     pub n_unknowns: usize,
     pub levels: usize,
-    /// Why the multigrid CG was abandoned for the sparse Cholesky factor (`Solver::Auto`
-    /// only), if it was.
-    pub multigrid_failure: Option<String>,
+    /// The linear solver that ran: `"cholesky"`, `"multigrid"`, or `"none"` (nothing
+    /// spans).
+    pub solver: &'static str,
 }
 
 /// Bytes a solve of `cells` cells needs (inputs not counted).
@@ -266,10 +264,11 @@ pub fn solve(pr: &Problem<'_>, opts: &Options<'_>) -> Result<Solution> {
     validate(pr, opts)?;
     let cells = pr.ny * pr.nx;
     if let Some(limit) = opts.memory_limit {
+        // `Auto` needs the multigrid's memory at least; the factor is checked exactly
+        // after its symbolic analysis.
         let factor = match opts.solver {
-            Solver::Multigrid => 0,
-            Solver::Auto if cells > DIRECT_MAX_UNKNOWNS => 0,
-            _ => cholesky_estimate(cells),
+            Solver::Cholesky => cholesky_estimate(cells),
+            _ => 0,
         };
         let need = memory_estimate(cells) + factor;
         if need > limit {
@@ -330,7 +329,7 @@ pub fn solve(pr: &Problem<'_>, opts: &Options<'_>) -> Result<Solution> {
         iterations: unit.iterations,
         n_unknowns: unit.n_unknowns,
         levels: unit.levels,
-        multigrid_failure: unit.multigrid_failure,
+        solver: unit.solver,
     })
 }
 
@@ -348,7 +347,7 @@ struct UnitSolution {
     iterations: usize,
     n_unknowns: usize,
     levels: usize,
-    multigrid_failure: Option<String>,
+    solver: &'static str,
 }
 
 fn solve_axis0(
@@ -405,43 +404,39 @@ fn solve_axis0(
         .map(|k| if k >= (ny - 1) * nx { 2.0 * c[k] } else { 0.0 })
         .collect();
     let max_iter = opts.max_iter.unwrap_or(DEFAULT_MAX_ITER);
-    let direct = match opts.solver {
-        Solver::Auto => n_unknowns <= DIRECT_MAX_UNKNOWNS,
-        Solver::Cholesky => true,
-        Solver::Multigrid => false,
-    };
     let mut iterations = 0;
     let mut levels = 0;
-    let mut multigrid_failure = None;
-    let (st, x, psi, residual) = if n_unknowns == 0 {
-        (fine, vec![0.0; n], vec![0.0; n], 0.0)
-    } else if direct {
-        let (x, psi, residual) = solve_direct(&fine, &rhs, &b_out)?;
-        (fine, x, psi, residual)
+    // Room for the factor: what the limits leave beside the rest of the solve.
+    let factor_room = {
+        let base = memory_estimate(n);
+        let room = |l: u64| l.saturating_sub(base);
+        match (opts.memory_limit, available_memory()) {
+            (Some(l), Some(a)) => Some(room(l).min(room(a))),
+            (Some(l), None) => Some(room(l)),
+            (None, Some(a)) => Some(room(a)),
+            (None, None) => None,
+        }
+    };
+    let factor = if n_unknowns == 0 || opts.solver == Solver::Multigrid {
+        None
+    } else {
+        match direct::Factor::new(&fine, factor_room) {
+            Ok(f) => Some(f),
+            Err(Error::TooLarge { .. }) if opts.solver == Solver::Auto => None,
+            Err(e) => return Err(e),
+        }
+    };
+    let (st, x, psi, residual, solver) = if n_unknowns == 0 {
+        (fine, vec![0.0; n], vec![0.0; n], 0.0, "none")
+    } else if let Some(mut f) = factor {
+        let (x, psi, residual) = solve_direct(&mut f, &fine, &rhs, &b_out);
+        (fine, x, psi, residual, "cholesky")
     } else {
         let mg = Multigrid::new(fine);
         levels = mg.n_levels();
-        match solve_multigrid(&mg, &rhs, &b_out, opts, max_iter)? {
-            Ok((x, psi, residual, it)) => {
-                iterations = it;
-                (mg.into_fine(), x, psi, residual)
-            }
-            Err(failure) => {
-                // Never a biased flow rate: factor the system when that fits, else report.
-                let fine = mg.into_fine();
-                let need = memory_estimate(n) + cholesky_estimate(n);
-                let fits = opts.solver == Solver::Auto
-                    && opts.memory_limit.is_none_or(|l| need <= l)
-                    && available_memory().is_none_or(|a| need <= a);
-                if !fits {
-                    return Err(failure);
-                }
-                multigrid_failure = Some(failure);
-                levels = 0;
-                let (x, psi, residual) = solve_direct(&fine, &rhs, &b_out)?;
-                (fine, x, psi, residual)
-            }
-        }
+        let (x, psi, residual, it) = solve_multigrid(&mg, &rhs, &b_out, opts, max_iter)??;
+        iterations = it;
+        (mg.into_fine(), x, psi, residual, "multigrid")
     };
     drop(rhs);
     let st = &st;
@@ -539,7 +534,7 @@ fn solve_axis0(
         iterations,
         n_unknowns,
         levels,
-        multigrid_failure: multigrid_failure.map(|e| e.to_string()),
+        solver,
     })
 }
 
@@ -551,35 +546,44 @@ fn rates_agree(q_in: f64, q_out: f64) -> bool {
     (q_in - q_out).abs() <= FLUX_AGREEMENT * q_out.abs()
 }
 
-fn relative_residual(st: &assemble::Stencil, x: &[f64], b: &[f64]) -> f64 {
-    let mut r = vec![0.0; b.len()];
-    st.residual(x, b, &mut r);
-    let bb = cg::dot(b, b);
-    if bb > 0.0 {
-        (cg::dot(&r, &r) / bb).sqrt()
-    } else {
-        0.0
-    }
-}
-
-/// `φ` and `ψ` from one sparse Cholesky factor; the larger of their relative residuals.
+/// `φ` from the factor, and `ψ = 1 − φ`: taken from `φ` when the inlet rate
+/// `Σ b_in (1 − φ)` keeps its digits (the cancellation bound `4 ε Σ b_in` is below `10⁻¹³` of
+/// it) and agrees with the outlet rate `b_out · φ` to [`DIRECT_AGREEMENT`]; else solved for
+/// with the same factor (the flow many decades below the conductances, near the percolation
+/// threshold). The larger relative residual of the solves.
 fn solve_direct(
+    f: &mut direct::Factor,
     st: &assemble::Stencil,
     b_in: &[f64],
     b_out: &[f64],
-) -> Result<(Vec<f64>, Vec<f64>, f64)> {
+) -> (Vec<f64>, Vec<f64>, f64) {
     let n = b_in.len();
-    let mut xs = vec![vec![0.0; n], vec![0.0; n]];
-
-    direct::solve(st, &[b_in, b_out], &mut xs, 2)?;
-    let psi = xs.pop().expect("two solutions");
-    let x = xs.pop().expect("two solutions");
-    let residual = relative_residual(st, &x, b_in).max(relative_residual(st, &psi, b_out));
-    Ok((x, psi, residual))
+    let mut x = vec![0.0; n];
+    let mut residual = f.solve(st, b_in, &mut x);
+    let q_out = cg::dot(b_out, &x);
+    let q_in = rate_error(&x, b_in);
+    let scale = cg::sum(b_in);
+    let kept = 4.0 * f64::EPSILON * scale <= 1e-13 * q_in.abs()
+        && (q_in - q_out).abs() <= DIRECT_AGREEMENT * q_out.abs();
+    let psi = if kept {
+        x.par_iter()
+            .zip(st.active.par_iter())
+            .map(|(&v, &on)| if on { 1.0 - v } else { 0.0 })
+            .collect()
+    } else {
+        let mut psi = vec![0.0; n];
+        residual = residual.max(f.solve(st, b_out, &mut psi));
+        psi
+    };
+    (x, psi, residual)
 }
+
+/// Inlet and outlet rates of a factored solve that agree to this need no reversed solve.
+const DIRECT_AGREEMENT: f64 = 1e-12;
 
 /// `Σ (1 − x_k) r_k`: to first order the error of the rate `w · x` of a solution `x` with
 /// residual `r`, since `w · (x* − x) = ψ* · r` with the adjoint `ψ* = A⁻¹ w = 1 − x*`.
+/// With `r = b_in` it is the inlet rate of `x`.
 fn rate_error(x: &[f64], r: &[f64]) -> f64 {
     let parts: Vec<f64> = x
         .par_chunks(cg::CHUNK)

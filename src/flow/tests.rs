@@ -813,3 +813,45 @@ fn multigrid_never_returns_a_biased_rate() {
         assert!(rel(c.flow_rate, a.flow_rate) < 1e-6, "case {k}");
     }
 }
+
+#[test]
+fn cholesky_on_a_winding_channel_over_eight_decades() {
+    // g³ over 8 decades along one winding one-cell channel (condition number near 1/ε):
+    // the factor keeps ~1e-6 of the rate; refinement must not make it worse, and both ends
+    // must still give the path's series resistance to that.
+    let (gap, ny, nx) = maze_gap(3, 64, 64, 8.0);
+    let pr = problem(&gap, ny, nx, 0, false);
+    let q = maze_oracle(&gap, ny, nx, &pr);
+    let sol = solve(&pr, &forced(Solver::Cholesky)).unwrap();
+    assert_eq!(sol.solver, "cholesky");
+    assert!(rel(sol.flow_rate, q) < 1e-5, "{} vs {q}", sol.flow_rate);
+    assert!(
+        rel(sol.inlet_flow_rate, q) < 1e-5,
+        "{} vs {q}",
+        sol.inlet_flow_rate
+    );
+}
+
+#[test]
+fn auto_uses_the_multigrid_when_the_factor_does_not_fit() {
+    let n = 96;
+    let gap = random_gap(11, n * n, 0.3);
+    let pr = problem(&gap, n, n, 0, false);
+    let exact = solve(&pr, &forced(Solver::Cholesky)).unwrap();
+    assert_eq!(exact.solver, "cholesky");
+    // Room for the rest of the solve but not for the factor.
+    let tight = memory_estimate(n * n) + 1024;
+    let auto = Options {
+        memory_limit: Some(tight),
+        ..Options::default()
+    };
+    let sol = solve(&pr, &auto).unwrap();
+    assert_eq!(sol.solver, "multigrid");
+    assert!(sol.iterations > 0);
+    assert!(rel(sol.flow_rate, exact.flow_rate) < 1e-10);
+    let chol = Options {
+        memory_limit: Some(tight),
+        ..forced(Solver::Cholesky)
+    };
+    assert!(matches!(solve(&pr, &chol), Err(Error::TooLarge { .. })));
+}

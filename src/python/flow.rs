@@ -96,6 +96,7 @@ pub(super) fn solve_reynolds_flow<'py>(
     d.set_item("iterations", sol.iterations)?;
     d.set_item("n_unknowns", sol.n_unknowns)?;
     d.set_item("levels", sol.levels)?;
+    d.set_item("solver", sol.solver)?;
     d.set_item("seconds", seconds)?;
     Ok(d)
 }
