@@ -15,7 +15,8 @@ Inputs:
   the lowest quantile level from 60 % up that leaves a cluster spanning along axis 0; a
   contact solve at this size takes minutes, the flow problem has the same structure.
 
-leakpath: ``leakpath.flow`` with its default solver (sparse Cholesky at these sizes) and
+leakpath: ``leakpath.flow`` with its default solver (the sparse Cholesky factor wherever it
+fits in memory, ``Flow.solver`` names it) and
 with ``solver="multigrid"`` (aggregation-multigrid preconditioned CG), each including
 labelling, assembly and fluxes. pyamg: ``smoothed_aggregation_solver(A)`` then
 ``solve(b, tol, accel="cg")`` on the same finite-volume matrix (assembled here with
@@ -251,7 +252,7 @@ def main() -> None:
             args.repeats,
         )
         q = f.flow_rate
-        default = "multigrid" if f.iterations > 0 else "cholesky"
+        default = f.solver
         rows = [(f"leakpath.flow (default: {default})", tl, f.iterations, q)]
         print(f"  leakpath {tl:.3f} s, {f.iterations} it, Q = {q:.12e}", flush=True)
         if n <= args.multigrid_max:
@@ -332,7 +333,11 @@ def main() -> None:
         "",
     ]
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text("\n".join(lines))
+    # Earlier runs stay below the new one, as the record of what changed.
+    earlier = args.out.read_text() if args.out.exists() else ""
+    if earlier:
+        earlier = "\n## Earlier runs\n\n" + earlier.replace("# Reynolds flow benchmark", "###", 1)
+    args.out.write_text("\n".join(lines) + earlier)
     print(f"wrote {args.out}")
 
 

@@ -80,3 +80,32 @@ def test_bad_gas_arguments_name_the_argument(kwargs, name):
         leakpath.flow(np.ones((4, 4)), dx=1.0, **kwargs)
     assert exc.value.argument == name
     assert str(exc.value).startswith(name + ":")
+
+
+def test_cli_gas_flow_matches_the_api(capsys):
+    import json
+
+    from leakpath.cli import main
+
+    spec = "spectral:n=64,hurst=0.8,seed=2,rms_height=1"
+    gas = ["--gas", "--inlet-pressure", "3", "--outlet-pressure", "1", "--gas-constant",
+           "287", "--temperature", "300"]
+    rc = main(["flow", spec, "--approach", "1.0", "--viscosity", "2", "--json", *gas])
+    assert rc == 0
+    out = json.loads(capsys.readouterr().out)
+    s = leakpath.spectral(64, 0.8, seed=2, rms_height=1.0)
+    st = leakpath.solve(s, 1.0, solver="polonsky-keer")
+    f = st.flow(viscosity=2.0, gas=True, inlet_pressure=3.0, outlet_pressure=1.0,
+                gas_constant=287.0, temperature=300.0)
+    assert out["gas"] is True
+    assert out["mass_flow_rate"] == pytest.approx(f.mass_flow_rate, rel=1e-9)
+    # ṁ = C (p_in² − p_out²)/(2 R_s T) with the liquid conductance of the same gap.
+    liquid = st.flow(viscosity=2.0)
+    assert out["mass_flow_rate"] == pytest.approx(
+        liquid.conductance * (9.0 - 1.0) / (2 * 287.0 * 300.0), rel=1e-9
+    )
+    # Gas inputs without --gas, and --gas without them, are refused in one line.
+    assert main(["flow", spec, "--approach", "1", "--temperature", "300"]) == 2
+    assert "--gas" in capsys.readouterr().err
+    assert main(["flow", spec, "--approach", "1", "--gas"]) == 2
+    assert "inlet_pressure" in capsys.readouterr().err
