@@ -16,13 +16,12 @@ spla = pytest.importorskip("scipy.sparse.linalg")
 ndimage = pytest.importorskip("scipy.ndimage")
 
 
-def oracle_rate(gap: np.ndarray, contact: np.ndarray) -> float:
-    """Q through the gap along axis 0 (η = Δp = dx = 1, side walls closed)."""
+def _system(gap: np.ndarray, contact: np.ndarray):
+    """The finite-volume system on the spanning cells along axis 0 (η = Δp = dx = 1, side
+    walls closed): the matrix (COO), the inlet right-hand side and the outlet weights."""
     c = np.where(contact, 0.0, gap**3 / 12.0)
     lab, _ = ndimage.label(c > 0)
     span = np.intersect1d(lab[0][lab[0] > 0], lab[-1][lab[-1] > 0])
-    if span.size == 0:
-        return 0.0
     cells = np.isin(lab, span)
     idx = -np.ones(gap.shape, dtype=np.int64)
     m = int(cells.sum())
@@ -46,15 +45,20 @@ def oracle_rate(gap: np.ndarray, contact: np.ndarray) -> float:
     rows.append(idx[cells])
     cols.append(idx[cells])
     vals.append(diag[cells])
-    A = sp.csc_matrix(
+    a = sp.coo_matrix(
         (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(m, m)
     )
-    b = np.zeros(gap.shape)
-    b[0] = 2 * c[0]
-    x = spla.spsolve(A, b[cells])
-    w = np.zeros(gap.shape)
-    w[-1] = 2 * c[-1]
-    return float(w[cells] @ x)
+    first = np.arange(gap.shape[0])[:, None] == 0
+    last = np.arange(gap.shape[0])[:, None] == gap.shape[0] - 1
+    return a, np.where(first, 2 * c, 0.0)[cells], np.where(last, 2 * c, 0.0)[cells]
+
+
+def oracle_rate(gap: np.ndarray, contact: np.ndarray) -> float:
+    """Q through the gap along axis 0 (η = Δp = dx = 1, side walls closed)."""
+    a, b_in, b_out = _system(gap, contact)
+    if a.shape[0] == 0:
+        return 0.0
+    return float(b_out @ spla.spsolve(a.tocsc(), b_in))
 
 
 def near_threshold_gap(seed: int) -> tuple[np.ndarray, np.ndarray]:
@@ -93,38 +97,9 @@ def extended_oracle_rates(gap: np.ndarray, contact: np.ndarray) -> tuple[float, 
     """Outlet and inlet rates of the same system by scipy's sparse LU with iterative
     refinement whose residuals are summed in numpy's extended precision (``longdouble``):
     the digits a double-precision factor loses when ``g³`` spans many decades come back."""
-    c = np.where(contact, 0.0, gap**3 / 12.0)
-    lab, _ = ndimage.label(c > 0)
-    span = np.intersect1d(lab[0][lab[0] > 0], lab[-1][lab[-1] > 0])
-    cells = np.isin(lab, span)
-    idx = -np.ones(gap.shape, dtype=np.int64)
-    m = int(cells.sum())
-    idx[cells] = np.arange(m)
-    rows, cols, vals = [], [], []
-    diag = np.zeros(gap.shape)
-    for a, b, ca, cb, sa, sb in (
-        (idx[:-1], idx[1:], c[:-1], c[1:], np.s_[:-1], np.s_[1:]),
-        (idx[:, :-1], idx[:, 1:], c[:, :-1], c[:, 1:], np.s_[:, :-1], np.s_[:, 1:]),
-    ):
-        ok = (a >= 0) & (b >= 0)
-        cf = np.zeros(a.shape)
-        cf[ok] = 2 * ca[ok] * cb[ok] / (ca[ok] + cb[ok])
-        rows += [a[ok], b[ok]]
-        cols += [b[ok], a[ok]]
-        vals += [-cf[ok], -cf[ok]]
-        diag[sa] += cf
-        diag[sb] += cf
-    diag[0] += 2 * c[0]
-    diag[-1] += 2 * c[-1]
-    rows.append(idx[cells])
-    cols.append(idx[cells])
-    vals.append(diag[cells])
-    a = sp.coo_matrix(
-        (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(m, m)
-    )
+    a, b_in, b_out = _system(gap, contact)
+    m = a.shape[0]
     lu = spla.splu(a.tocsc())
-    b_in = np.where(np.arange(gap.shape[0])[:, None] == 0, 2 * c, 0.0)[cells]
-    b_out = np.where(np.arange(gap.shape[0])[:, None] == gap.shape[0] - 1, 2 * c, 0.0)[cells]
     ld = np.longdouble
     data = a.data.astype(ld)
 
