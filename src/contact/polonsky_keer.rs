@@ -256,7 +256,8 @@ pub struct Solution {
     /// Conjugate-gradient iterations (each one product `C t`).
     pub iterations: usize,
     /// FFT operator applications in total: one per iteration, plus fresh products `C p` (start,
-    /// large set changes, convergence checks) and one for the influence table.
+    /// large set changes, convergence checks) and one for the influence table when no kernel
+    /// table was at hand (periodic [`solve`], [`solve_with_operator`]).
     pub applies: usize,
     /// Preconditioner applications (FFT pairs on the unpadded `ny × nx` grid), one per
     /// preconditioned iteration.
