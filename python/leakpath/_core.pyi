@@ -138,9 +138,9 @@ def solve_polonsky_keer(
     half-space compliance ``E*|q|/2`` on the contact set). ``operator_of``: reuse the operator
     of a :class:`ContactProblem` of the same grid. ``coarse_start``: a cold solve (no
     ``initial_pressure``) on a grid of at least 64 points per side starts from the solution on
-    the grid coarsened by two (every other node, ``2·dx``, solved the same way down to fewer
-    than 64 points per side, to KKT ``1e-2``), prolonged bilinearly; the answer is the same
-    minimiser.
+    the grid coarsened by two (every other node, ``2·dx``, solved the same way, at most two
+    levels deep and not below 64 points per side, to KKT ``1e-2``), prolonged bilinearly; the
+    answer is the same minimiser.
 
     Returns a dict: ``pressure``, ``displacement``, ``gap`` (``(ny, nx)`` float64; the gap is
     not clamped), ``approach``, ``iterations`` (CG steps), ``applies`` (FFT convolutions),

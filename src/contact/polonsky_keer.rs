@@ -71,8 +71,14 @@
 //!
 //! * `d = 0` (the set did not change): nothing more; the iteration costs one FFT product.
 //! * `1 ≤ |supp d| ≤` [`sparse_limit`]: `C d` by direct summation with the influence table
-//!   `C e_0` (built once by one product), `N` multiply-adds per point.
+//!   `C e_0`, `N` multiply-adds per point. The table is the kernel table when one is at hand
+//!   (free solves built here: the Love table the operator is made from; a caller's
+//!   [`solve_with_kernel`]), otherwise it is built once by one product.
 //! * more changes (early iterations): a fresh product `u = C p`.
+//!
+//! The iterates `t`, `z` and `p` vanish off the contact set, often on whole rows of the grid;
+//! the operator skips the forward row FFTs of zero rows (their transform is zero), so a
+//! product of such a field costs less than one of a dense field.
 //!
 //! Before the solver declares convergence on an incrementally updated state it recomputes
 //! `u = C p` and the gap and tests again, so the returned fields and certificate always come
@@ -97,7 +103,8 @@
 //! after one, stays plain, and so does every step while more than half the points are in
 //! contact (where preconditioning stops paying); it is switched off for the rest of a solve
 //! when the certificate grows past `10³×` its best value. Each preconditioned iteration costs one more FFT pair on the
-//! unpadded grid (about a quarter of a free-boundary product); measured at 257², tol 1e-12,
+//! unpadded grid (about a quarter of a free-boundary product; rows without a contact point
+//! skip both their forward and their inverse row FFT, as `z` is only used on `I_c`); measured at 257², tol 1e-12,
 //! it takes 1.2–2.8× fewer iterations (see [`PRECONDITION_MAX_FRACTION`]); the answer is
 //! the same minimiser (identical contact sets in every test).
 //!
@@ -121,6 +128,7 @@
 //! partial results sequentially in chunk order, and the operator is deterministic, so results
 //! do not depend on the number of rayon threads.
 
+use std::borrow::Cow;
 use std::time::{Duration, Instant};
 
 use rayon::prelude::*;
@@ -248,7 +256,8 @@ pub struct Solution {
     /// Conjugate-gradient iterations (each one product `C t`).
     pub iterations: usize,
     /// FFT operator applications in total: one per iteration, plus fresh products `C p` (start,
-    /// large set changes, convergence checks) and one for the influence table.
+    /// large set changes, convergence checks) and one for the influence table when no kernel
+    /// table was at hand (periodic [`solve`], [`solve_with_operator`]).
     pub applies: usize,
     /// Preconditioner applications (FFT pairs on the unpadded `ny × nx` grid), one per
     /// preconditioned iteration.
@@ -278,6 +287,34 @@ pub fn default_max_iter(n: usize) -> usize {
 /// Solve on a new operator built for `problem` (free: Love kernel, zero-padded FFT; periodic:
 /// spectral stiffness).
 pub fn solve(problem: &Problem, control: Control, opts: &Options) -> Result<Solution> {
+    solve_level(
+        problem,
+        control,
+        opts,
+        Finish::Confirmed,
+        multilevel::MAX_COARSE_LEVELS,
+    )
+}
+
+/// How a solve ends once the certificate on the incrementally updated state meets `tol`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) enum Finish {
+    /// Recompute `u = C p` and test again: the returned fields and certificate come from a
+    /// fresh product (every solve a caller sees).
+    Confirmed,
+    /// Stop there (a coarse level of a coarse start, whose pressure is only a starting point).
+    /// The returned displacement is empty unless the last state came from a fresh product.
+    Incremental,
+}
+
+/// [`solve`] ending as `finish` says, with at most `levels` coarse levels below it.
+pub(crate) fn solve_level(
+    problem: &Problem,
+    control: Control,
+    opts: &Options,
+    finish: Finish,
+    levels: usize,
+) -> Result<Solution> {
     validate(problem, control, opts)?;
     let (ny, nx) = (problem.ny, problem.nx);
     if let Some(limit) = opts.memory_limit {
@@ -295,14 +332,28 @@ pub fn solve(problem: &Problem, control: Control, opts: &Options) -> Result<Solu
     }
     // The coarse levels run before the fine operator exists, so their memory is not added
     // to its.
-    let start = coarse_start(problem, control, opts)?;
-    let op = match problem.boundary {
+    let start = coarse_start(problem, control, opts, levels)?;
+    match problem.boundary {
         Boundary::Free => {
-            Operator::try_free(&Kernel::try_new(ny, nx, problem.dx, problem.e_star)?)?
+            // The Love kernel table is the influence table `C e_0` of the sparse corrections:
+            // kept instead of being rebuilt by a product.
+            let kernel = Kernel::try_new(ny, nx, problem.dx, problem.e_star)?;
+            let op = Operator::try_free(&kernel)?;
+            run_from(
+                &op,
+                Some(&kernel.table),
+                problem,
+                control,
+                opts,
+                start,
+                finish,
+            )
         }
-        Boundary::Periodic => Operator::try_periodic(ny, nx, problem.dx, problem.e_star)?,
-    };
-    run_from(&op, problem, control, opts, start)
+        Boundary::Periodic => {
+            let op = Operator::try_periodic(ny, nx, problem.dx, problem.e_star)?;
+            run_from(&op, None, problem, control, opts, start, finish)
+        }
+    }
 }
 
 /// The coarse-level start of a cold solve, if [`Options::coarse_start`] asks for one.
@@ -310,9 +361,10 @@ fn coarse_start(
     problem: &Problem,
     control: Control,
     opts: &Options,
+    levels: usize,
 ) -> Result<Option<(Vec<f64>, CoarseCost)>> {
-    if multilevel::applies_to(problem.ny, problem.nx, opts) {
-        multilevel::start(problem, control, opts)
+    if levels > 0 && multilevel::applies_to(problem.ny, problem.nx, opts) {
+        multilevel::start(problem, control, opts, levels)
     } else {
         Ok(None)
     }
@@ -321,19 +373,21 @@ fn coarse_start(
 /// [`run`] from a coarse start (if any), reporting its cost.
 fn run_from(
     op: &Operator,
+    table: Option<&[f64]>,
     problem: &Problem,
     control: Control,
     opts: &Options,
     start: Option<(Vec<f64>, CoarseCost)>,
+    finish: Finish,
 ) -> Result<Solution> {
     match start {
         Some((p0, cost)) => {
             // The start pressure becomes the iterate (no second N-vector).
-            let mut sol = run(op, problem, control, opts, Some(p0))?;
+            let mut sol = run(op, table, problem, control, opts, Some(p0), finish)?;
             sol.coarse = cost;
             Ok(sol)
         }
-        None => run(op, problem, control, opts, None),
+        None => run(op, table, problem, control, opts, None, finish),
     }
 }
 
@@ -346,7 +400,33 @@ pub fn solve_with_operator(
     control: Control,
     opts: &Options,
 ) -> Result<Solution> {
+    solve_with_kernel(op, None, problem, control, opts)
+}
+
+/// [`solve_with_operator`] with the caller's influence table `C e_0` (row-major `ny × nx`,
+/// the [`Kernel`] table of `op`: the Love table for the free boundary, the circulant's first
+/// column for the periodic one), which spares the product that would build it.
+pub fn solve_with_kernel(
+    op: &Operator,
+    table: Option<&[f64]>,
+    problem: &Problem,
+    control: Control,
+    opts: &Options,
+) -> Result<Solution> {
     validate(problem, control, opts)?;
+    if let Some(t) = table {
+        if t.len() != problem.ny * problem.nx {
+            return Err(Error::invalid(
+                "kernel",
+                format!(
+                    "{} values for a {} × {} grid",
+                    t.len(),
+                    problem.ny,
+                    problem.nx
+                ),
+            ));
+        }
+    }
     if op.ny != problem.ny || op.nx != problem.nx || op.boundary != problem.boundary {
         return Err(Error::invalid(
             "operator",
@@ -361,8 +441,8 @@ pub fn solve_with_operator(
             ),
         ));
     }
-    let start = coarse_start(problem, control, opts)?;
-    run_from(op, problem, control, opts, start)
+    let start = coarse_start(problem, control, opts, multilevel::MAX_COARSE_LEVELS)?;
+    run_from(op, table, problem, control, opts, start, Finish::Confirmed)
 }
 
 fn boundary_name(b: Boundary) -> &'static str {
@@ -592,9 +672,10 @@ struct Work<'a> {
     r: Vec<f64>,
     /// `u` lives in `r` (displacement control).
     u_in_r: bool,
-    /// Influence of a unit pressure at point 0, `C e_0` (row-major `ny × nx`), built on first
-    /// use: free, `C_{ab} = table[|Δi|, |Δj|]`; periodic, `table[Δi mod ny, Δj mod nx]`.
-    table: Vec<f64>,
+    /// Influence of a unit pressure at point 0, `C e_0` (row-major `ny × nx`): the caller's
+    /// kernel table, or built on first use by one product: free,
+    /// `C_{ab} = table[|Δi|, |Δj|]`; periodic, `table[Δi mod ny, Δj mod nx]`.
+    table: Cow<'a, [f64]>,
     /// Per chunk, up to [`SPARSE_MAX`] `(index, d)` of the last update's non-linear changes.
     slots: Vec<(usize, f64)>,
     /// Scratch list of all changes in index order.
@@ -737,10 +818,13 @@ impl Work<'_> {
                     zc[i] = if pc[i] > 0.0 { gc[i] } else { 0.0 };
                 }
             });
+        // z is only needed on I_c: rows without a contact point skip their inverse row FFT.
+        let nx = self.nx;
+        let in_contact = |i: usize| p[i * nx..(i + 1) * nx].iter().any(|&v| v > 0.0);
         self.pre
             .as_ref()
             .expect("precondition() needs a preconditioner")
-            .apply(z, r);
+            .apply_on_rows(z, r, &in_contact);
         self.pre_applies += 1;
         let (p, g, r) = (&self.p, &self.g, &self.r);
         self.parts
@@ -986,11 +1070,11 @@ impl Work<'_> {
             self.r.fill(0.0);
             self.r[0] = 1.0;
             // Its capacity was reserved (fallibly) with the other work arrays.
-            let mut table = std::mem::take(&mut self.table);
+            let mut table = std::mem::take(&mut self.table).into_owned();
             table.resize(self.r.len(), 0.0);
             self.op.apply(&self.r, &mut table);
             self.applies += 1;
-            self.table = table;
+            self.table = Cow::Owned(table);
         }
     }
 
@@ -1006,7 +1090,7 @@ impl Work<'_> {
             parts,
             ..
         } = self;
-        let (p, table, changes) = (&*p, &*table, &*changes);
+        let (p, table, changes) = (&*p, &**table, &*changes);
         parts
             .par_iter_mut()
             .zip(g.par_chunks_mut(CHUNK))
@@ -1035,7 +1119,7 @@ impl Work<'_> {
             parts,
             ..
         } = self;
-        let (p, table, changes) = (&*p, &*table, &*changes);
+        let (p, table, changes) = (&*p, &**table, &*changes);
         parts
             .par_iter_mut()
             .zip(u.par_chunks_mut(CHUNK))
@@ -1164,10 +1248,12 @@ fn height_stats(h: &[f64]) -> (f64, f64, f64) {
 /// used instead of `opts.initial_pressure` (the coarse start; there is no warm start then).
 fn run(
     op: &Operator,
+    table: Option<&[f64]>,
     problem: &Problem,
     control: Control,
     opts: &Options,
     start: Option<Vec<f64>>,
+    finish: Finish,
 ) -> Result<Solution> {
     let (ny, nx) = (problem.ny, problem.nx);
     let n = ny * nx;
@@ -1238,7 +1324,10 @@ fn run(
         g: alloc::try_zeroed(n, "the gap field")?,
         t: alloc::try_zeroed(n, "the conjugate direction")?,
         r: alloc::try_zeroed(n, "the operator work field")?,
-        table: alloc::try_with_capacity(n, "the influence table")?,
+        table: match table {
+            Some(k) => Cow::Borrowed(k),
+            None => Cow::Owned(alloc::try_with_capacity(n, "the influence table")?),
+        },
         slots: alloc::try_filled(
             n_chunks * SPARSE_MAX,
             (0, 0.0),
@@ -1298,7 +1387,7 @@ fn run(
         }
         best_cert = best_cert.min(cert);
         if cert <= opts.tol {
-            if fresh {
+            if fresh || finish == Finish::Incremental {
                 break;
             }
             // Converged on the incrementally updated u: confirm on a fresh product.
@@ -1462,11 +1551,18 @@ fn run(
     let pre_applies = w.pre_applies;
     let pressure = std::mem::take(&mut w.p);
     let gap = std::mem::take(&mut w.g);
+    let displacement = if fresh {
+        w.into_displacement()
+    } else {
+        // Finish::Incremental: `u` was updated incrementally (displacement control: `r` holds
+        // the last `C t`).
+        Vec::new()
+    };
     Ok(Solution {
         ny,
         nx,
         pressure,
-        displacement: w.into_displacement(),
+        displacement,
         gap,
         approach: delta,
         iterations: it,
@@ -2118,6 +2214,84 @@ mod tests {
             }
             let e = max_rel(&got, &want);
             assert!(e < 1e-12, "periodic={periodic}: {e}");
+            if !periodic {
+                // The Love kernel table, which free solves use instead of the product C e_0,
+                // against the same FFT oracle.
+                let love = Kernel::new(ny, nx, 0.3, 2.0).table;
+                let mut got = vec![0.0; n];
+                for (c, out) in got.chunks_mut(CHUNK).enumerate() {
+                    add_sparse(out, c * CHUNK, &changes, &love, ny, nx, false);
+                }
+                let e = max_rel(&got, &want);
+                assert!(e < 1e-12, "Love table: {e}");
+                // The oracle catches a table off by one column.
+                let mut shifted = love.clone();
+                for i in 0..ny {
+                    for j in 0..nx - 1 {
+                        shifted[i * nx + j] = love[i * nx + j + 1];
+                    }
+                }
+                let mut bad = vec![0.0; n];
+                for (c, out) in bad.chunks_mut(CHUNK).enumerate() {
+                    add_sparse(out, c * CHUNK, &changes, &shifted, ny, nx, false);
+                }
+                assert!(max_rel(&bad, &want) > 1e-3);
+            }
+        }
+    }
+
+    #[test]
+    fn caller_kernel_table_and_incremental_finish() {
+        let (ny, nx) = (48usize, 45usize);
+        let h = rough(ny, nx, 21);
+        let (hmax, hmin, hsum) = height_stats(&h);
+        for boundary in [Boundary::Free, Boundary::Periodic] {
+            let pr = problem(&h, ny, nx, boundary);
+            let top = match boundary {
+                Boundary::Free => hmax - hmin,
+                Boundary::Periodic => hmax - hsum / (ny * nx) as f64,
+            };
+            let (op, table) = match boundary {
+                Boundary::Free => {
+                    let k = Kernel::new(ny, nx, pr.dx, pr.e_star);
+                    (Operator::free(&k), k.table)
+                }
+                Boundary::Periodic => {
+                    let op = Operator::periodic(ny, nx, pr.dx, pr.e_star);
+                    let mut e0 = vec![0.0; ny * nx];
+                    e0[0] = 1.0;
+                    let mut t = vec![0.0; ny * nx];
+                    op.apply(&e0, &mut t);
+                    (op, t)
+                }
+            };
+            for f in [0.2, 0.5] {
+                let control = Control::Approach(f * top);
+                let o = opts(1e-12);
+                let a = solve_with_operator(&op, &pr, control, &o).unwrap();
+                let b = solve_with_kernel(&op, Some(&table), &pr, control, &o).unwrap();
+                let ca: Vec<bool> = a.pressure.iter().map(|&p| p > 0.0).collect();
+                let cb: Vec<bool> = b.pressure.iter().map(|&p| p > 0.0).collect();
+                assert_eq!(ca, cb, "{boundary:?} {f}");
+                assert!(max_rel(&a.pressure, &b.pressure) < 1e-8);
+                assert!(b.kkt <= 1e-12);
+                // The given table spares the product that builds it (when the sparse path ran).
+                assert!(b.applies <= a.applies, "{} vs {}", b.applies, a.applies);
+                // An incremental finish stops on the updated state: the same contact set at a
+                // looser tolerance, no confirming product, no displacement unless fresh.
+                let loose = opts(1e-6);
+                let c = solve_level(&pr, control, &loose, Finish::Confirmed, 0).unwrap();
+                let d = solve_level(&pr, control, &loose, Finish::Incremental, 0).unwrap();
+                assert!(d.applies <= c.applies);
+                assert_eq!(c.iterations, d.iterations);
+                assert_eq!(c.pressure, d.pressure);
+                assert!(d.displacement.is_empty() || d.displacement == c.displacement);
+            }
+            let short = vec![0.0; ny * nx - 1];
+            assert!(
+                solve_with_kernel(&op, Some(&short), &pr, Control::Approach(0.1), &opts(1e-8))
+                    .is_err()
+            );
         }
     }
 }

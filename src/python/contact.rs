@@ -355,9 +355,12 @@ pub(crate) mod pk_py {
         operator_of: Option<PyRef<'py, super::ContactProblem>>,
         coarse_start: bool,
     ) -> PyResult<Bound<'py, PyDict>> {
-        let op = operator_of
-            .as_ref()
-            .map(|cp| std::sync::Arc::clone(cp.inner.operator()));
+        let op = operator_of.as_ref().map(|cp| {
+            (
+                std::sync::Arc::clone(cp.inner.operator()),
+                std::sync::Arc::clone(cp.inner.shared_kernel()),
+            )
+        });
         let [ny, nx] = [heights.shape()[0], heights.shape()[1]];
         let control = match (approach, mean_pressure) {
             (Some(d), None) => Control::Approach(d),
@@ -447,7 +450,10 @@ pub(crate) mod pk_py {
             };
             crate::python::on_solver_pool(ny * nx, || match &op {
                 // The operator of a kept ContactProblem: no kernel or FFT set-up per solve.
-                Some(op) => pk::solve_with_operator(op, &problem, control, &opts),
+                // Its kernel table is the influence table of the sparse corrections.
+                Some((op, kernel)) => {
+                    pk::solve_with_kernel(op, Some(&kernel.table), &problem, control, &opts)
+                }
                 None => pk::solve(&problem, control, &opts),
             })
         })?;
