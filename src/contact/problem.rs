@@ -527,14 +527,20 @@ mod tests {
             // A ContactProblem hands its periodic kernel table (the product C e_0) to the
             // solver, which otherwise builds it on first use.
             Boundary::Periodic => {
-                let op = Operator::try_periodic(ny, nx, 0.5, 2.0).unwrap();
-                let mut unit = vec![0.0; ny * nx];
-                unit[0] = 1.0;
-                let mut column = vec![0.0; ny * nx];
-                op.apply(&unit, &mut column);
+                let (op, column) = periodic_column(ny, nx);
                 pk::solve_with_kernel(&op, Some(&column), &problem, control, &opts).unwrap()
             }
         }
+    }
+
+    /// The periodic operator of the tests and its column `C e_0` (the kernel table).
+    fn periodic_column(ny: usize, nx: usize) -> (Operator, Vec<f64>) {
+        let op = Operator::try_periodic(ny, nx, 0.5, 2.0).unwrap();
+        let mut unit = vec![0.0; ny * nx];
+        unit[0] = 1.0;
+        let mut column = vec![0.0; ny * nx];
+        op.apply(&unit, &mut column);
+        (op, column)
     }
 
     #[allow(clippy::too_many_arguments)]
@@ -555,11 +561,7 @@ mod tests {
                 (kernel, op)
             }
             Boundary::Periodic => {
-                let op = Operator::try_periodic(ny, nx, 0.5, 2.0).unwrap();
-                let mut unit = vec![0.0; ny * nx];
-                unit[0] = 1.0;
-                let mut column = vec![0.0; ny * nx];
-                op.apply(&unit, &mut column);
+                let (op, column) = periodic_column(ny, nx);
                 (Kernel::from_table(ny, nx, 0.5, 2.0, column), op)
             }
         };
