@@ -127,39 +127,53 @@ impl Stencil {
 }
 
 impl Stencil {
+    /// Calls `f(l, c)` for every face of cell `k` with conductance `c > 0` to neighbour `l`
+    /// (east, west, south, north, with the wrap).
+    #[inline(always)]
+    pub fn for_each_face(&self, k: usize, mut f: impl FnMut(usize, f64)) {
+        let (ny, nx) = (self.ny, self.nx);
+        let (i, j) = (k / nx, k % nx);
+        let base = i * nx;
+        let mut face = |l: usize, w: f64| {
+            if w > 0.0 {
+                f(l, w)
+            }
+        };
+        if j + 1 < nx {
+            face(k + 1, self.e[k]);
+        } else if self.periodic && nx > 1 {
+            face(base, self.e[k]);
+        }
+        if let Some(wj) = self.west(j) {
+            face(base + wj, self.e[base + wj]);
+        }
+        if i + 1 < ny {
+            face(k + nx, self.s[k]);
+        }
+        if i > 0 {
+            face(k - nx, self.s[k - nx]);
+        }
+    }
+
     /// `r = b − A x` with every row summed in double-double arithmetic (error-free products
     /// and sums, rounded once): the residual is then exact to about `ε |r|`, not `ε Σ |a x|`,
     /// which is what lets iterative refinement correct the digits a factor loses when the
     /// conductances span many decades.
     pub fn residual_compensated(&self, x: &[f64], b: &[f64], r: &mut [f64]) {
-        let (ny, nx) = (self.ny, self.nx);
+        let nx = self.nx;
         r.par_chunks_mut(nx)
             .enumerate()
             .with_min_len(ROWS_PER_TASK)
             .for_each(|(i, rrow)| {
-                let base = i * nx;
                 for (j, rv) in rrow.iter_mut().enumerate() {
-                    let k = base + j;
+                    let k = i * nx + j;
                     if !self.active[k] {
                         *rv = b[k] - self.d[k] * x[k];
                         continue;
                     }
                     let mut acc = Compensated::new(b[k]);
                     acc.add_product(-self.d[k], x[k]);
-                    if j + 1 < nx {
-                        acc.add_product(self.e[k], x[k + 1]);
-                    } else if self.periodic && nx > 1 {
-                        acc.add_product(self.e[k], x[base]);
-                    }
-                    if let Some(w) = self.west(j) {
-                        acc.add_product(self.e[base + w], x[base + w]);
-                    }
-                    if i + 1 < ny {
-                        acc.add_product(self.s[k], x[k + nx]);
-                    }
-                    if i > 0 {
-                        acc.add_product(self.s[k - nx], x[k - nx]);
-                    }
+                    self.for_each_face(k, |l, c| acc.add_product(c, x[l]));
                     *rv = acc.value();
                 }
             });

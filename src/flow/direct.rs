@@ -204,19 +204,17 @@ impl Factor {
 /// The lower triangle (row ≥ column) of the operator on the unknowns, by columns, rows
 /// ascending: each unknown's diagonal, then its neighbours of larger index.
 fn lower_csc(st: &Stencil, index: &[usize], cells: &[usize]) -> (Vec<usize>, Vec<usize>, Vec<f64>) {
-    let (ny, nx) = (st.ny, st.nx);
     let m = cells.len();
     let mut col_ptr = Vec::with_capacity(m + 1);
     let mut row_idx = Vec::with_capacity(3 * m);
     let mut vals = Vec::with_capacity(3 * m);
     col_ptr.push(0);
     for (q, &k) in cells.iter().enumerate() {
-        let (i, j) = (k / nx, k % nx);
         let mut below: [(usize, f64); 4] = [(usize::MAX, 0.0); 4];
         let mut nb = 0;
-        let mut push = |l: usize, c: f64| {
+        st.for_each_face(k, |l, c| {
             let t = index[l];
-            if c > 0.0 && t != usize::MAX && t > q {
+            if t != usize::MAX && t > q {
                 // The two faces of a 2-wide periodic row join the same pair: add them.
                 if let Some(e) = below[..nb].iter_mut().find(|e| e.0 == t) {
                     e.1 -= c;
@@ -225,23 +223,7 @@ fn lower_csc(st: &Stencil, index: &[usize], cells: &[usize]) -> (Vec<usize>, Vec
                     nb += 1;
                 }
             }
-        };
-        if j > 0 {
-            push(k - 1, st.e[k - 1]);
-        } else if st.periodic && nx > 1 {
-            push(k + nx - 1, st.e[k + nx - 1]);
-        }
-        if j + 1 < nx {
-            push(k + 1, st.e[k]);
-        } else if st.periodic && nx > 1 {
-            push(i * nx, st.e[k]);
-        }
-        if i > 0 {
-            push(k - nx, st.s[k - nx]);
-        }
-        if i + 1 < ny {
-            push(k + nx, st.s[k]);
-        }
+        });
         below[..nb].sort_unstable_by_key(|e| e.0);
         row_idx.push(q);
         vals.push(st.d[k]);

@@ -126,29 +126,8 @@ impl Neighbours for Stencil {
         self.dir[i]
     }
     #[inline(always)]
-    fn for_each(&self, k: usize, mut f: impl FnMut(usize, f64)) {
-        let (ny, nx) = (self.ny, self.nx);
-        let (i, j) = (k / nx, k % nx);
-        let base = i * nx;
-        let mut face = |l: usize, w: f64| {
-            if w > 0.0 {
-                f(l, w)
-            }
-        };
-        if j + 1 < nx {
-            face(k + 1, self.e[k]);
-        } else if self.periodic && nx > 1 {
-            face(base, self.e[k]);
-        }
-        if let Some(wj) = self.west(j) {
-            face(base + wj, self.e[base + wj]);
-        }
-        if i + 1 < ny {
-            face(k + nx, self.s[k]);
-        }
-        if i > 0 {
-            face(k - nx, self.s[k - nx]);
-        }
+    fn for_each(&self, k: usize, f: impl FnMut(usize, f64)) {
+        self.for_each_face(k, f);
     }
 }
 
