@@ -75,19 +75,22 @@ def test_cold_replay_gives_the_same_table_to_round_off(surface, default_sweep):
 def test_warm_start_from_a_state_or_pressure_field(surface):
     prob = ContactProblem(surface)
     hs = surface.height_range
-    first = prob.solve(0.4 * hs)
+    # One level of a 20-level sweep below.
+    first = prob.solve(0.45 * hs)
     cold = prob.solve(0.5 * hs)
     from_state = prob.solve(0.5 * hs, warm_start=first)
     from_field = prob.solve(0.5 * hs, warm_start=first.pressure)
     assert np.array_equal(from_state.pressure, from_field.pressure)
     assert np.array_equal(from_state.contact, cold.contact)
-    # A cold solve starts from the coarse-grid solution; without it (p = 0) the warm start
-    # must save iterations.
+    # A cold solve starts from the coarse-grid solution; against a start from p = 0 the warm
+    # start must save FFT products (the work: a chord step is an iteration of one product, a
+    # regular one with a wholesale set change two). On a grid this small the gain is a few
+    # products and depends on the surface; the sweep benchmarks measure it at scale.
     from_zero = _core.solve_polonsky_keer(
         prob._h, surface.dx, prob.e_star, prob.boundary, approach=0.5 * hs,
         tol=DEFAULT_TOL, operator_of=prob._core, coarse_start=False,
     )
-    assert from_state.iterations < from_zero["iterations"]
+    assert from_state.fft_products < from_zero["applies"]
     assert np.array_equal(from_zero["pressure"] > 0, cold.contact)
     with pytest.raises(ValueError, match="^warm_start"):
         prob.solve(0.5 * hs, warm_start=np.ones((3, 3), dtype=bool))

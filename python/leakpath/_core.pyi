@@ -43,10 +43,12 @@ class ContactResult(_SolveFields):
     solver: _Literal["polonsky-keer", "active-set", "lawson-hanson"]
 
 class PolonskyKeerResult(_SolveFields):
-    """:func:`solve_polonsky_keer`: the common fields plus the load."""
+    """:func:`solve_polonsky_keer`: the common fields plus the load, and how many of the
+    iterations were chord steps (each one product of the whole pressure change)."""
 
     load: float
     mean_pressure: float
+    chord_steps: int
 
 class ClusterResult(_TypedDict):
     """:func:`classify_clusters`."""
@@ -144,7 +146,8 @@ def solve_polonsky_keer(
 
     Returns a dict: ``pressure``, ``displacement``, ``gap`` (``(ny, nx)`` float64; the gap is
     not clamped), ``approach``, ``iterations`` (CG steps), ``applies`` (FFT convolutions),
-    ``preconditioner_applies``, ``kkt``, ``load`` (``F = dx² Σ p``), ``mean_pressure``,
+    ``preconditioner_applies``, ``chord_steps`` (iterations taken as chord steps), ``kkt``,
+    ``load`` (``F = dx² Σ p``), ``mean_pressure``,
     ``contact_points`` (``#(p > 0)``), ``seconds``, and the cost of the coarse levels (0
     without a coarse start; not included in the counts above): ``coarse_levels``,
     ``coarse_iterations``, ``coarse_applies``, ``coarse_preconditioner_applies`` (raw, each

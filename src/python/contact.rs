@@ -473,6 +473,7 @@ pub(crate) mod pk_py {
         d.set_item("iterations", sol.iterations)?;
         d.set_item("applies", sol.applies)?;
         d.set_item("preconditioner_applies", sol.preconditioner_applies)?;
+        d.set_item("chord_steps", sol.chord_steps)?;
         super::set_coarse(&d, &sol.coarse)?;
         d.set_item("kkt", sol.kkt)?;
         d.set_item("load", sol.load)?;
