@@ -330,7 +330,8 @@ def section_large(sizes, variants=("plain", "pre", "coarse")) -> list[str]:
     lines.append("")
     lines.append(
         "| grid | Δ/h_s | plain: time, its, products | pre: time, its, products, pairs | "
-        "coarse: time, its (chord steps), products, pairs | coarse levels: products, pairs raw (fine-equiv.) "
+        "coarse: time, its (chord steps), products, pairs | "
+        "coarse levels: products, pairs raw (fine-equiv.) "
         "| total products (fine-equiv.) | plain ÷ coarse total | raw total | plain ÷ raw total "
         "| pre ÷ coarse total | ms/it ÷ apply (plain / pre / coarse) | ContactMechanics | "
         "contact fraction (plain / pre / coarse / CM) | peak MiB (plain / coarse) | load at "
