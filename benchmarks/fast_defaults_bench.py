@@ -267,6 +267,8 @@ from leakpath import _core
 from leakpath.contact import ContactProblem
 n, frac = int(sys.argv[1]), float(sys.argv[2])
 pre, coarse = sys.argv[3] == "1", sys.argv[4] == "1"
+# The plain variant is the regular Polonsky–Keer iteration: no chord steps either.
+chords = pre or coarse
 if n == 4097:
     s = leakpath.rmd(12, 2.1, seed=0)
 else:
@@ -284,7 +286,8 @@ del p
 hs = h.max() - h.min()
 t0 = time.perf_counter()
 out = _core.solve_polonsky_keer(h, 1.0, 1.0, "free", approach=frac * hs, tol=1e-8,
-                                precondition=pre, operator_of=prob._core, coarse_start=coarse)
+                                precondition=pre, operator_of=prob._core, coarse_start=coarse,
+                                chord_steps=chords)
 dt = time.perf_counter() - t0
 print(json.dumps({
     "seconds": dt, "iterations": out["iterations"], "applies": out["applies"],
@@ -312,10 +315,11 @@ def run_child(n, frac, pre, coarse=False):
 def section_large(sizes, variants=("plain", "pre", "coarse")) -> list[str]:
     lines = ["## Free boundary, large grids, tolerance 1e-8·h_s", ""]
     lines.append(
-        "plain = Polonsky–Keer without preconditioner or coarse start (`precondition=False, "
-        "coarse_start=False`); pre = preconditioned, cold start (`coarse_start=False`, the "
-        "former default); coarse = the default (preconditioned, coarse-to-fine start, chord "
-        "steps while the contact set changes wholesale). FFT "
+        "plain = Polonsky–Keer without preconditioner, coarse start or chord steps "
+        "(`precondition=False, coarse_start=False, chord_steps=False`); pre = preconditioned, "
+        "cold start with chord steps (`coarse_start=False`); coarse = the default "
+        "(preconditioned, coarse-to-fine start, chord steps while the contact set changes "
+        "wholesale). FFT "
         "products = operator applications on the padded fine grid; pairs = preconditioner FFT "
         "pairs on the unpadded grid (smooth-padded). Coarse levels: raw products / pairs over "
         "all levels (each on its own, smaller grid) and their fine-grid equivalents "

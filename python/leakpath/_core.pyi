@@ -115,6 +115,7 @@ def solve_polonsky_keer(
     precondition: bool = True,
     operator_of: ContactProblem | None = None,
     coarse_start: bool = True,
+    chord_steps: bool = True,
 ) -> PolonskyKeerResult:
     """Normal contact of an elastic rough surface against a rigid flat, Polonsky–Keer CG.
 
@@ -142,7 +143,11 @@ def solve_polonsky_keer(
     ``initial_pressure``) on a grid of at least 64 points per side starts from the solution on
     the grid coarsened by two (every other node, ``2·dx``, solved the same way, at most two
     levels deep and not below 64 points per side, to KKT ``1e-2``), prolonged bilinearly; the
-    answer is the same minimiser.
+    answer is the same minimiser. ``chord_steps`` (displacement control): while an iteration
+    truncates or adds more than 0.5 % of the contact set, the next one is a chord step (the
+    projected trial step's whole change gets one FFT product and an exact line search on the
+    chord) instead of a conjugate step followed by a fresh product; ``False`` keeps every
+    iteration a regular Polonsky–Keer step. The answer is the same minimiser.
 
     Returns a dict: ``pressure``, ``displacement``, ``gap`` (``(ny, nx)`` float64; the gap is
     not clamped), ``approach``, ``iterations`` (CG steps), ``applies`` (FFT convolutions),

@@ -143,6 +143,7 @@ pub fn start(
         should_stop: opts.should_stop,
         precondition: opts.precondition,
         coarse_start: true,
+        chord_steps: opts.chord_steps,
     };
     // Only the coarse pressure is used: no confirming product at the end of a coarse level.
     let sol = pk::solve_level(

@@ -271,6 +271,9 @@ pub struct Options<'a> {
     /// ([`crate::multilevel`]); ignored with a warm start and on grids smaller than
     /// [`crate::multilevel::COARSE_START_MIN_SIDE`] per side.
     pub coarse_start: bool,
+    /// Take chord steps while the contact set changes wholesale (displacement control, see
+    /// the module documentation); `false` keeps every iteration a regular Polonsky–Keer step.
+    pub chord_steps: bool,
 }
 
 impl Default for Options<'_> {
@@ -283,6 +286,7 @@ impl Default for Options<'_> {
             should_stop: None,
             precondition: true,
             coarse_start: true,
+            chord_steps: true,
         }
     }
 }
@@ -1578,7 +1582,7 @@ fn run(
         // the trial projected step `d = p(τ₀) − p` is applied through its own product `C d`,
         // so `g` stays exact with one product per iteration; the step length along `d` is
         // the exact minimiser of the energy on the chord, capped at 1 (feasible).
-        if chord && !steepest && matches!(mode, Mode::Displacement(_)) {
+        if chord && opts.chord_steps && !steepest && matches!(mode, Mode::Displacement(_)) {
             let tau0 = if preconditioned { tau_pre } else { tau_plain };
             if tau0.is_finite() && tau0 > 0.0 {
                 let tau_ol0 = if preconditioned { tau0 / c00 } else { tau0 };
@@ -1944,6 +1948,13 @@ mod tests {
                     };
                     let s = solve(&pr, Control::Approach(delta), &o).unwrap();
                     chords += s.chord_steps;
+                    let regular = Options {
+                        chord_steps: false,
+                        ..o
+                    };
+                    let r = solve(&pr, Control::Approach(delta), &regular).unwrap();
+                    assert_eq!(r.chord_steps, 0);
+                    assert!(max_rel(&r.pressure, &exact) < 1e-8);
                     assert!(s.chord_steps < s.iterations);
                     let ca: Vec<bool> = s.pressure.iter().map(|&p| p > 0.0).collect();
                     let ce: Vec<bool> = exact.iter().map(|&p| p > 0.0).collect();

@@ -382,6 +382,7 @@ impl ContactProblem {
             should_stop: opts.should_stop,
             precondition: true,
             coarse_start: true,
+            chord_steps: true,
         };
         let s = pk::solve_with_kernel(
             &self.op,

@@ -336,7 +336,7 @@ pub(crate) mod pk_py {
     #[pyo3(signature = (
         heights, dx, e_star, boundary="free", approach=None, mean_pressure=None, tol=None,
         max_iter=None, initial_pressure=None, memory_limit=None, precondition=true,
-        operator_of=None, coarse_start=true
+        operator_of=None, coarse_start=true, chord_steps=true
     ))]
     #[allow(clippy::too_many_arguments)]
     pub(crate) fn solve_polonsky_keer<'py>(
@@ -354,6 +354,7 @@ pub(crate) mod pk_py {
         precondition: bool,
         operator_of: Option<PyRef<'py, super::ContactProblem>>,
         coarse_start: bool,
+        chord_steps: bool,
     ) -> PyResult<Bound<'py, PyDict>> {
         let op = operator_of.as_ref().map(|cp| {
             (
@@ -447,6 +448,7 @@ pub(crate) mod pk_py {
                 should_stop: Some(&should_stop),
                 precondition,
                 coarse_start,
+                chord_steps,
             };
             crate::python::on_solver_pool(ny * nx, || match &op {
                 // The operator of a kept ContactProblem: no kernel or FFT set-up per solve.
