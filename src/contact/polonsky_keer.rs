@@ -1494,6 +1494,8 @@ fn run(
     let mut last_pre = false;
     let mut last_poll = Instant::now();
     let mut best_cert = f64::INFINITY;
+    // Chord steps (and the β = 0 that goes with them) only where they are taken.
+    let chords_on = opts.chord_steps && matches!(mode, Mode::Displacement(_));
     let mut chord = false;
     let (mut tau_pre, mut tau_plain) = (f64::NAN, f64::NAN);
     loop {
@@ -1582,7 +1584,7 @@ fn run(
         // the trial projected step `d = p(τ₀) − p` is applied through its own product `C d`,
         // so `g` stays exact with one product per iteration; the step length along `d` is
         // the exact minimiser of the energy on the chord, capped at 1 (feasible).
-        if chord && opts.chord_steps && !steepest && matches!(mode, Mode::Displacement(_)) {
+        if chord && !steepest {
             let tau0 = if preconditioned { tau_pre } else { tau_plain };
             if tau0.is_finite() && tau0 > 0.0 {
                 let tau_ol0 = if preconditioned { tau0 / c00 } else { tau0 };
@@ -1675,7 +1677,7 @@ fn run(
         }
         let now = sparse.unwrap_or(up);
         let consistent = up.n_nl <= sparse_max;
-        chord = wholesale(up.n_nl, up.n_c, sparse_max);
+        chord = chords_on && wholesale(up.n_nl, up.n_c, sparse_max);
         match mode {
             Mode::Displacement(_) if consistent => {
                 fresh = false;
@@ -1962,10 +1964,13 @@ mod tests {
                     let e = max_rel(&s.pressure, &exact);
                     assert!(e < 1e-8, "seed {seed} Δ*={frac}: rel err {e}");
                     assert!(s.kkt <= 1e-12);
-                    // Load control takes no chord steps.
+                    // Load control takes no chord steps, so the option changes nothing there.
                     let l = solve(&pr, Control::MeanPressure(s.mean_pressure), &o).unwrap();
                     assert_eq!(l.chord_steps, 0);
                     assert!(max_rel(&l.pressure, &exact) < 1e-8);
+                    let lr = solve(&pr, Control::MeanPressure(s.mean_pressure), &regular).unwrap();
+                    assert_eq!((l.iterations, l.applies), (lr.iterations, lr.applies));
+                    assert_eq!(l.pressure, lr.pressure);
                 }
             }
         }
