@@ -749,12 +749,35 @@ struct Work<'a> {
     pre: Option<Operator>,
     z: Vec<f64>,
     pre_applies: usize,
-    /// Chord steps taken (see [`CHORD_FRACTION`]).
-    chord_steps: usize,
 }
 
 fn combine(parts: &[Acc]) -> Acc {
     parts.iter().fold(Acc::ZERO, |a, b| a.merge(b))
+}
+
+/// `t_k ← f(k, p_k, g_k, t_k, acc)` over the fixed chunks, each chunk's reductions in its
+/// `acc`; returns them combined. The passes that rewrite `t` (the directions, the chord trial).
+fn rewrite_t(
+    parts: &mut [Acc],
+    t: &mut [f64],
+    p: &[f64],
+    g: &[f64],
+    f: impl Fn(usize, f64, f64, f64, &mut Acc) -> f64 + Sync,
+) -> Acc {
+    parts
+        .par_iter_mut()
+        .zip(t.par_chunks_mut(CHUNK))
+        .enumerate()
+        .for_each(|(c, (acc, tc))| {
+            let lo = c * CHUNK;
+            let (pc, gc) = (&p[lo..lo + tc.len()], &g[lo..lo + tc.len()]);
+            let mut a = Acc::ZERO;
+            for (i, ti) in tc.iter_mut().enumerate() {
+                *ti = f(lo + i, pc[i], gc[i], *ti, &mut a);
+            }
+            *acc = a;
+        });
+    combine(parts)
 }
 
 impl Work<'_> {
@@ -911,65 +934,39 @@ impl Work<'_> {
         let Work {
             p, g, z, t, parts, ..
         } = self;
-        let (p, g, z) = (&*p, &*g, &*z);
-        parts
-            .par_iter_mut()
-            .zip(t.par_chunks_mut(CHUNK))
-            .enumerate()
-            .for_each(|(c, (acc, tc))| {
-                let lo = c * CHUNK;
-                let n = tc.len();
-                let (pc, gc, zc) = (&p[lo..lo + n], &g[lo..lo + n], &z[lo..lo + n]);
-                let mut a = Acc::ZERO;
-                for i in 0..n {
-                    let ti = if pc[i] > 0.0 {
-                        zc[i] + beta * tc[i]
-                    } else {
-                        0.0
-                    };
-                    tc[i] = ti;
-                    if pc[i] > 0.0 {
-                        a.n_w += 1;
-                        a.gt += gc[i] * ti;
-                        a.st += ti;
-                    }
-                }
-                *acc = a;
-            });
-        combine(parts)
+        let z = &*z;
+        rewrite_t(parts, t, p, g, |k, pk, gk, tk, a| {
+            if pk > 0.0 {
+                let ti = z[k] + beta * tk;
+                a.n_w += 1;
+                a.gt += gk * ti;
+                a.st += ti;
+                ti
+            } else {
+                0.0
+            }
+        })
     }
 
     /// Step 2: `t = g + β t` on the working set `W`, 0 elsewhere. `W = I_c`, or
     /// `I_c ∪ {g < 0}` for a steepest-descent step. Returns `Σ g t`, `Σ_W t`, `|W|`.
     fn direction(&mut self, beta: f64, steepest: bool) -> Acc {
         let Work { p, g, t, parts, .. } = self;
-        let (p, g) = (&*p, &*g);
-        parts
-            .par_iter_mut()
-            .zip(t.par_chunks_mut(CHUNK))
-            .enumerate()
-            .for_each(|(c, (acc, tc))| {
-                let lo = c * CHUNK;
-                let (pc, gc) = (&p[lo..lo + tc.len()], &g[lo..lo + tc.len()]);
-                let mut a = Acc::ZERO;
-                for i in 0..tc.len() {
-                    let ti = if pc[i] > 0.0 {
-                        gc[i] + beta * tc[i]
-                    } else if steepest && gc[i] < 0.0 {
-                        gc[i]
-                    } else {
-                        0.0
-                    };
-                    tc[i] = ti;
-                    if ti != 0.0 || pc[i] > 0.0 {
-                        a.n_w += 1;
-                        a.gt += gc[i] * ti;
-                        a.st += ti;
-                    }
-                }
-                *acc = a;
-            });
-        combine(parts)
+        rewrite_t(parts, t, p, g, |_, pk, gk, tk, a| {
+            let ti = if pk > 0.0 {
+                gk + beta * tk
+            } else if steepest && gk < 0.0 {
+                gk
+            } else {
+                0.0
+            };
+            if ti != 0.0 || pk > 0.0 {
+                a.n_w += 1;
+                a.gt += gk * ti;
+                a.st += ti;
+            }
+            ti
+        })
     }
 
     /// Step 3–4 reductions on `r = C t`: `Σ r t` (t vanishes off `W`) and, for load control
@@ -1003,28 +1000,16 @@ impl Work<'_> {
     /// and the counts of the trial (`n_nl`: points where `p(τ) ≠ p − τ t`).
     fn chord(&mut self, tau: f64, tau_ol: f64) -> Acc {
         let Work { p, g, t, parts, .. } = self;
-        let (p, g) = (&*p, &*g);
-        parts
-            .par_iter_mut()
-            .zip(t.par_chunks_mut(CHUNK))
-            .enumerate()
-            .for_each(|(c, (acc, tc))| {
-                let lo = c * CHUNK;
-                let (pc, gc) = (&p[lo..lo + tc.len()], &g[lo..lo + tc.len()]);
-                let mut a = Acc::ZERO;
-                for i in 0..tc.len() {
-                    let lin = pc[i] - tau * tc[i];
-                    let pn = Self::step_point(lin, gc[i], tau_ol, &mut a);
-                    if pn != lin {
-                        a.n_nl += 1;
-                    }
-                    let d = pn - pc[i];
-                    tc[i] = d;
-                    a.gt += gc[i] * d;
-                }
-                *acc = a;
-            });
-        combine(parts)
+        rewrite_t(parts, t, p, g, |_, pk, gk, tk, a| {
+            let lin = pk - tau * tk;
+            let pn = Self::step_point(lin, gk, tau_ol, a);
+            if pn != lin {
+                a.n_nl += 1;
+            }
+            let d = pn - pk;
+            a.gt += gk * d;
+            d
+        })
     }
 
     /// The chord step `p ← p + s d`, `g ← g + s r` with `d` in `t` and `r = C d`. For
@@ -1463,7 +1448,6 @@ fn run(
         pre: None,
         z: Vec::new(),
         pre_applies: 0,
-        chord_steps: 0,
     };
     if opts.precondition {
         let pre = Operator::inverse_compliance(ny, nx, problem.dx, problem.e_star)?;
@@ -1503,6 +1487,7 @@ fn run(
     // Chord steps (and the β = 0 that goes with them) only where they are taken.
     let chords_on = opts.chord_steps && matches!(mode, Mode::Displacement(_));
     let mut chord = false;
+    let mut chord_steps = 0usize;
     let (mut tau_pre, mut tau_plain) = (f64::NAN, f64::NAN);
     loop {
         let cert = state.certificate() / scale;
@@ -1619,7 +1604,7 @@ fn run(
                     } else {
                         tau_plain = next;
                     }
-                    w.chord_steps += 1;
+                    chord_steps += 1;
                     chord = wholesale(trial.n_nl, state.n_c, sparse_max);
                     continue;
                 }
@@ -1728,7 +1713,6 @@ fn run(
     let sum_p = state.sum_p;
     let applies = w.applies;
     let pre_applies = w.pre_applies;
-    let chord_steps = w.chord_steps;
     let pressure = std::mem::take(&mut w.p);
     let gap = std::mem::take(&mut w.g);
     let displacement = if fresh {
