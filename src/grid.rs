@@ -27,13 +27,16 @@ pub enum Boundary {
     Periodic,
 }
 
-/// Transform sizes for a grid.
+/// Transform sizes for a grid: for the free boundary the smallest 2,3,5-smooth `P ≥ 2n − 2`
+/// per axis. The kernel is even, `K(d) = K(−d)`, so a circulant of period `P` reproduces the
+/// linear convolution on the `n`-point patch as soon as every distance `|d| ≤ n − 1` has
+/// `|d| ≤ P/2`: the two images `d` and `d − P` of the largest one then carry the same value.
+/// `2n − 2` rather than `2n − 1` makes the paper's `n = 2^m + 1` grids exact powers of two
+/// (129 → 256, where `2n − 1` needs 270).
 pub fn padded(ny: usize, nx: usize, boundary: Boundary) -> (usize, usize) {
+    let free = |n: usize| smooth_size(n.saturating_mul(2).saturating_sub(2).max(1));
     match boundary {
-        Boundary::Free => (
-            smooth_size(ny.saturating_mul(2) - 1),
-            smooth_size(nx.saturating_mul(2) - 1),
-        ),
+        Boundary::Free => (free(ny), free(nx)),
         Boundary::Periodic => (ny, nx),
     }
 }

@@ -1,9 +1,10 @@
 //! The influence operator `u = C p` on a whole field, by FFT convolution.
 //!
 //! * Free boundary: the Love kernel table is laid out as an even, zero-padded circulant on a
-//!   `Py × Px` grid with `P ≥ 2n − 1` per axis (so the circular convolution equals the linear
-//!   one on the `ny × nx` patch), `P` the smallest 2,3,5-smooth size: `2n` for `n = 2^m + 1`
-//!   factors badly.
+//!   `Py × Px` grid with `P ≥ 2n − 2` per axis, `P` the smallest 2,3,5-smooth size
+//!   ([`crate::grid::padded`]): the kernel is even, so the circular convolution equals the
+//!   linear one on the `ny × nx` patch (at `P = 2n − 2` the slot of the largest distance
+//!   `n − 1` is shared by `±(n − 1)`, which carry the same value).
 //! * Periodic: the half-space stiffness in Fourier space, `û_q = 2 p̂_q / (E* |q|)` for
 //!   `q ≠ 0`, `û_0 = 0` (u has zero mean), `q = 2π·(k/L)` rad/length — the convention of Tamaas
 //!   and of ContactMechanics' `PeriodicFFTElasticHalfSpace` with zero q = 0 stiffness.
@@ -365,11 +366,25 @@ mod tests {
         assert_eq!(smooth_size(8193), 8640);
         assert_eq!(smooth_size(1), 1);
         assert_eq!(smooth_size(7), 8);
+        // Free boundary: 2n − 2, so the paper's 2^m + 1 grids transform at powers of two.
+        assert_eq!(padded(129, 4097, Boundary::Free), (256, 8192));
+        assert_eq!(padded(1, 2, Boundary::Free), (1, 2));
+        assert_eq!(padded(100, 3, Boundary::Free), (200, 4));
     }
 
     #[test]
     fn free_operator_equals_dense_product() {
-        for &(ny, nx) in &[(9usize, 9usize), (8, 8), (7, 12), (13, 5), (1, 6)] {
+        // P = 2n − 2 exactly for 9, 5, 13, 17, 33, 2, 3: the largest distance shares its slot.
+        let shapes = [
+            (9usize, 9usize),
+            (8, 8),
+            (7, 12),
+            (13, 5),
+            (1, 6),
+            (17, 33),
+            (2, 3),
+        ];
+        for &(ny, nx) in &shapes {
             let ker = Kernel::new(ny, nx, 0.3, 2.0);
             let op = Operator::free(&ker);
             let p = lcg((ny * 100 + nx) as u64, ny * nx);
