@@ -259,6 +259,7 @@ def solve_reynolds_flow(
     max_iter: int | None = None,
     memory_limit: int | None = None,
     solver: _Literal["auto", "cholesky", "multigrid"] = "auto",
+    threads: int | None = None,
 ) -> FlowResult:
     """Steady Reynolds flow ``∇·(g³/(12η) ∇p) = 0`` through the gap (docs/flow.md).
 
@@ -278,5 +279,10 @@ def solve_reynolds_flow(
     ``n_unknowns``, ``levels``, ``solver`` (the one that ran: "cholesky", "multigrid" or
     "none" when nothing spans), ``seconds``. ``InvalidArgumentError`` for bad input,
     ``NotConvergedError`` past ``max_iter`` (default 20000), ``ProblemTooLargeError`` above
-    ``memory_limit`` bytes. The GIL is released; Ctrl-C raises ``KeyboardInterrupt``.
+    ``memory_limit`` bytes. ``threads``: run on a kept pool of that many threads (default:
+    the solver pool, all cores); the result does not depend on it. The GIL is released;
+    Ctrl-C raises ``KeyboardInterrupt``.
     """
+
+def solver_threads() -> int:
+    """Threads of the pool the solvers run on: all cores, or ``RAYON_NUM_THREADS``."""

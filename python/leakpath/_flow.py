@@ -34,7 +34,7 @@ from typing import Any
 
 import numpy as np
 
-from . import _core
+from . import _core, _validate
 from ._memory import memory_limit as default_memory_limit
 from .errors import InvalidArgumentError
 
@@ -180,6 +180,7 @@ def flow(
     outlet_pressure: float | None = None,
     gas_constant: float | None = None,
     temperature: float | None = None,
+    threads: int | None = None,
 ) -> Flow:
     """Steady Reynolds flow through the gap (module docstring; docs/flow.md).
 
@@ -207,6 +208,8 @@ def flow(
             needs ``inlet_pressure`` and ``outlet_pressure`` (absolute, ``≥ 0``),
             ``gas_constant`` ``R_s`` (specific, e.g. 287.05 J/(kg K) for air) and
             ``temperature`` ``T`` (absolute, > 0). ``viscosity`` is the gas's.
+        threads: threads of the solve (default ``None``: all cores). ``1`` runs it on one
+            core beside other work, as sweeps do. Results do not depend on it.
 
     Raises:
         InvalidArgumentError: naming the argument (NaN or infinite gaps, negative gaps off
@@ -345,6 +348,9 @@ def flow(
             f"solver: must be 'auto', 'cholesky' or 'multigrid', got {solver!r}",
             argument="solver",
         )
+    threads = _validate.optional_integer(
+        "threads", threads, low=1, high=4096, what="a positive integer (at most 4096) or None"
+    )
     limit = default_memory_limit() if memory_limit is None else int(memory_limit)
     res = _core.solve_reynolds_flow(
         gap,
@@ -358,6 +364,7 @@ def flow(
         max_iter=None if max_iter is None else int(max_iter),
         memory_limit=limit,
         solver=solver,
+        threads=None if threads is None else int(threads),
     )
     ny, nx = gap.shape
     n_along, n_across = (ny, nx) if axis == 0 else (nx, ny)

@@ -4,6 +4,7 @@ use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray2, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
+use super::pools::{check_threads, in_pool};
 use super::{row_major, to_py};
 use crate::error::Error;
 use crate::flow::{self, Options, Problem};
@@ -13,7 +14,7 @@ use crate::flow::{self, Options, Problem};
 #[pyfunction]
 #[pyo3(signature = (
     gap, dx, contact=None, axis=0, viscosity=1.0, pressure_drop=1.0, periodic=false,
-    tol=flow::DEFAULT_TOL, max_iter=None, memory_limit=None, solver="auto"
+    tol=flow::DEFAULT_TOL, max_iter=None, memory_limit=None, solver="auto", threads=None
 ))]
 #[allow(clippy::too_many_arguments)]
 pub(super) fn solve_reynolds_flow<'py>(
@@ -29,8 +30,10 @@ pub(super) fn solve_reynolds_flow<'py>(
     max_iter: Option<usize>,
     memory_limit: Option<u64>,
     solver: &str,
+    threads: Option<i64>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let solver = flow::Solver::parse(solver).map_err(to_py)?;
+    let threads = check_threads(threads)?;
     let [ny, nx] = [gap.shape()[0], gap.shape()[1]];
     if let Some(c) = &contact {
         if c.shape() != gap.shape() {
@@ -71,8 +74,13 @@ pub(super) fn solve_reynolds_flow<'py>(
                 memory_limit,
                 should_stop: Some(&stop),
             };
-            super::on_solver_pool(ny * nx, || flow::solve(&problem, &opts))
-        })
+            match threads {
+                Some(_) => in_pool(threads, || flow::solve(&problem, &opts)),
+                None => Ok(super::on_solver_pool(ny * nx, || {
+                    flow::solve(&problem, &opts)
+                })),
+            }
+        })?
         .map_err(to_py)?;
     let seconds = start.elapsed().as_secs_f64();
     let d = PyDict::new(py);

@@ -17,6 +17,7 @@ mod clusters;
 mod contact;
 mod errors;
 mod flow;
+mod pools;
 
 use errors::internal_error;
 pub(crate) use errors::to_py;
@@ -218,6 +219,13 @@ fn kernel_table<'py>(
     arr.reshape([ny, nx])
 }
 
+/// Threads of the pool the solvers run on (rayon's global pool: all cores, or
+/// `RAYON_NUM_THREADS`).
+#[pyfunction]
+fn solver_threads() -> usize {
+    rayon::current_num_threads()
+}
+
 #[pymodule]
 #[pyo3(name = "_core")]
 fn core_module(m: &Bound<'_, PyModule>) -> PyResult<()> {
@@ -232,5 +240,6 @@ fn core_module(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(clusters::classify_clusters, m)?)?;
     m.add_function(wrap_pyfunction!(contact::pk_py::solve_polonsky_keer, m)?)?;
     m.add_function(wrap_pyfunction!(flow::solve_reynolds_flow, m)?)?;
+    m.add_function(wrap_pyfunction!(solver_threads, m)?)?;
     Ok(())
 }
