@@ -233,3 +233,110 @@ def test_flow_figures_and_cli_columns(tmp_path):
     )
     assert off.returncode == 0, off.stderr
     assert not list((tmp_path / "off" / "figures").glob("fig4*"))
+
+
+# ------------------------------------------------------------ flows beside the contact solves
+def _states(n=5, size=33, seed=3):
+    s = leakpath.spectral(size, 0.8, seed=seed, rms_height=1.0)
+    problem = ContactProblem(s)
+    approaches = np.linspace(0.0, 0.6, n) * s.height_range
+    return [problem.solve(float(a)) for a in approaches]
+
+
+def _direct(state, axis=0):
+    f = leakpath.flow(state, axis=axis)
+    return {"Q": f.flow_rate, "K": f.permeability}
+
+
+@pytest.mark.parametrize("background", [True, False])
+def test_level_flows_equal_each_flow_computed_alone(background):
+    states = _states()
+    flows = leakage.LevelFlows(0, True, background=background)
+    try:
+        for k, st in enumerate(states):
+            flows.submit(k, st)
+        flows.submit("again", states[0])  # an identical state: solved once, same numbers
+        got = flows.finished() + flows.finish()
+    finally:
+        flows.close()
+    assert [key for key, _, _ in got] == [0, 1, 2, 3, 4, "again"]
+    for key, cols, seconds in got:
+        want = _direct(states[0 if key == "again" else key])
+        assert cols == want  # the same bits: the solver's result ignores its thread count
+        assert seconds >= 0
+    assert any(cols["Q"] > 0 for _, cols, _ in got)
+
+
+def test_level_flows_switched_off_give_nan_without_solving(monkeypatch):
+    def refuse(*args, **kwargs):
+        raise AssertionError("no flow may be solved with the columns switched off")
+
+    monkeypatch.setattr(leakage, "flow", refuse)
+    flows = leakage.LevelFlows(0, False)
+    flows.submit(0, _states(n=1)[0])
+    [(key, cols, seconds)] = flows.finish()
+    assert key == 0 and math.isnan(cols["Q"]) and math.isnan(cols["K"]) and seconds == 0.0
+
+
+def test_queued_flows_are_helped_by_the_submitting_thread(monkeypatch):
+    import threading
+    import time
+
+    states = _states(n=6)
+    where = []
+    real = leakage.flow
+
+    def slow(state, **kwargs):
+        where.append(threading.current_thread().name)
+        time.sleep(0.05)  # slower than submitting: the queue fills up
+        return real(state, **kwargs)
+
+    monkeypatch.setattr(leakage, "flow", slow)
+    monkeypatch.setattr(leakage, "MAX_PENDING", 1)
+    flows = leakage.LevelFlows(0, True, background=True)
+    try:
+        for k, st in enumerate(states):
+            flows.submit(k, st)
+        got = flows.finish()
+    finally:
+        flows.close()
+    assert [k for k, _, _ in got] == list(range(6))
+    assert threading.current_thread().name in where
+    assert any(name.startswith("leakpath-flow") for name in where)
+    for k, cols, _ in got:
+        assert cols == _direct(states[k])
+
+
+def test_a_failing_flow_stops_the_sweep_and_its_level_is_not_saved(tmp_path, monkeypatch):
+    s = leakpath.spectral(32, 0.8, seed=6, rms_height=1.0)
+    fresh = sweep(s, levels=5)
+    real = leakage.flow
+    calls = []
+
+    def failing(state, **kwargs):
+        calls.append(1)
+        if len(calls) == 4:  # the reference, then levels 0 (shared), 1, 2: level 3 fails
+            raise leakpath.errors.NotConvergedError("flow: injected failure")
+        return real(state, **kwargs)
+
+    monkeypatch.setattr(leakage, "flow", failing)
+    with pytest.raises(leakpath.errors.NotConvergedError, match="injected"):
+        sweep(s, levels=5, checkpoint_dir=tmp_path)
+    saved = sorted(p.name for p in tmp_path.glob("level_*.json"))
+    assert "level_0003.json" not in saved
+    monkeypatch.setattr(leakage, "flow", real)
+    resumed = sweep(s, levels=5, checkpoint_dir=tmp_path)
+    assert 3 not in resumed.resumed
+    assert resumed.csv_text() == fresh.csv_text()
+
+
+def test_flow_threads_argument():
+    st = _states(n=3)[2]
+    one = leakpath.flow(st, threads=1)
+    every = leakpath.flow(st)
+    assert one.flow_rate == every.flow_rate
+    np.testing.assert_array_equal(one.pressure, every.pressure)
+    for bad in (0, -1, 2.5, True, "2"):
+        with pytest.raises(InvalidArgumentError, match="threads"):
+            leakpath.flow(st, threads=bad)
+    assert leakpath._core.solver_threads() >= 1

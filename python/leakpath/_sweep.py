@@ -53,13 +53,16 @@ CSV holds only numbers that a rerun reproduces bit for bit.
 
 Warm starts and reproducibility
 -------------------------------
-``warm_start=True`` starts level ``k`` from the *contact mask* of level ``k − 1`` (passed as
-``warm_start=mask`` to :meth:`leakpath.contact.ContactProblem.solve`, which rebuilds its
-factor from that set). The numbers of level ``k`` are then a deterministic function of the
-surface, ``Δ_k`` and the previous mask, so a sweep resumed from a checkpoint (which stores
-the masks) produces a byte-identical CSV. ``warm_start=False`` solves every level from
-``p = 0`` ("without warm starting", as in the paper). The Polonsky–Keer solver is always
-started cold in a sweep (it would need the previous pressure field, not a mask).
+``warm_start=True`` (default) starts level ``k`` from the levels before it: Polonsky–Keer
+from the linear extrapolation of the last two pressure fields (:func:`_warm_start_for`), the
+exact solvers from the previous contact mask. Checkpoints store what a start uses (pressure
+fields, masks), so a sweep resumed from a checkpoint produces a byte-identical CSV.
+``warm_start=False`` solves every level from ``p = 0`` ("without warm starting", as in the
+paper).
+
+The leak-rate columns of each level are computed by :class:`leakpath.leakage.LevelFlows`,
+beside the next contact solve when there are two or more solver threads; a level is written
+to the checkpoint once its flow is done.
 
 Checkpoints
 -----------
@@ -247,10 +250,9 @@ def _analyse(
     keep_fields: bool,
     t_start: float,
     keep_pressure: bool = False,
-    flow_axis: int = 0,
-    flow_on: bool = False,
 ) -> _Level:
-    """Row, masks and fields of a solved level (``t_start``: when its solve began)."""
+    """Row, masks and fields of a solved level (``t_start``: when its solve began), without
+    the leak-rate columns (:class:`leakpath.leakage.LevelFlows` adds them)."""
     p0 = state.percolation(axis=0, connectivity=connectivity)
     p1 = state.percolation(axis=1, connectivity=connectivity)
     pa = state.percolation(axis=axis, connectivity=connectivity)
@@ -278,7 +280,6 @@ def _analyse(
         "kkt_restarts": int(restarts),
         "kkt": float(state.kkt),
     }
-    row.update(leakage.flow_columns(state, flow_axis, flow_on))  # Q, K (leakpath.leakage)
     classes = np.asarray(pa.class_map(), dtype=np.int8)
     fields = None
     if keep_fields:
@@ -454,7 +455,6 @@ def sweep(
         "m2": ref_mom.m2,
         "m4": ref_mom.m4,
         "alpha": ref_mom.alpha,
-        "K": leakage.reference_permeability(ref_state, flow_axis, flow_on),  # leakage
     }
 
     checkpoint = None
@@ -479,13 +479,40 @@ def sweep(
     shape = surface.shape
     done: list[_Level] = []
     resumed: list[int] = []
+    # Levels solved here whose leak rate is still being computed; saved once it is.
+    waiting: dict[int, _Level] = {}
+    flows = leakage.LevelFlows(flow_axis, flow_on)  # leakpath.leakage
+
+    def record(results: list[tuple[Any, dict[str, float], float]]) -> None:
+        for key, cols, seconds in results:
+            if key == "reference":
+                reference["K"] = cols["K"]
+                continue
+            level = waiting.pop(key)
+            level.row.update(cols)
+            level.seconds += seconds
+            if checkpoint is not None:
+                checkpoint.save(key, level, shape)
+            if bar is not None:
+                bar.update(1)
+                bar.set_postfix(contact=f"{level.row['contact_fraction']:.3f}")
+        # A warm start needs only the last two pressure fields; a level keeps its own until
+        # it is saved.
+        unsaved = {id(lv) for lv in waiting.values()}
+        for lv in done[:-2]:
+            if id(lv) not in unsaved:
+                lv.pressure = None
+
     try:
+        flows.submit("reference", ref_state)
         for k, target in enumerate(level_list):
             level = None
             if checkpoint is not None:
                 level = checkpoint.load(k, shape, need_pressure=keep_pressure)
             if level is not None:
                 resumed.append(k)
+                if bar is not None:
+                    bar.update(1)
             else:
                 warm: bool | np.ndarray = False
                 if warm_start and done:
@@ -502,18 +529,14 @@ def sweep(
                     keep_fields=keep_fields,
                     t_start=t0,
                     keep_pressure=keep_pressure,
-                    flow_axis=flow_axis,  # leakpath.leakage
-                    flow_on=flow_on,
                 )
-                if checkpoint is not None:
-                    checkpoint.save(k, level, shape)
+                waiting[k] = level
+                flows.submit(k, state)
             done.append(level)
-            if len(done) > 2:
-                done[-3].pressure = None  # a warm start needs only the last two fields
-            if bar is not None:
-                bar.update(1)
-                bar.set_postfix(contact=f"{level.row['contact_fraction']:.3f}")
+            record(flows.finished())
+        record(flows.finish())
     finally:
+        flows.close()
         if bar is not None:
             bar.close()
 

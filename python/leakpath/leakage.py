@@ -20,16 +20,29 @@ the three columns are NaN.
 By default (``flow=None``) the columns are computed on grids of at most
 :data:`FLOW_AUTO_MAX_POINTS` points (a sparse Cholesky solve per level: milliseconds at
 129², a fraction of a second at 513²) and left out (NaN) above, where they are opt-in.
+
+A sweep computes them with :class:`LevelFlows`: the flow of a level depends on that level's
+gap alone, and its factorisation runs on one core, so with two or more solver threads the
+flows run on a background thread (a one-thread pool of their own) while the next contact
+solve runs. The numbers are the same bits as computing them in turn: the flow solver's
+results do not depend on its thread count, and levels with identical gaps (the reference
+and the ``Δ = 0`` row) are solved once.
 """
 
 from __future__ import annotations
 
+import hashlib
 import math
 import numbers
+import time
+from collections import deque
+from collections.abc import Hashable
+from concurrent.futures import Future, ThreadPoolExecutor
 from typing import Any
 
 import numpy as np
 
+from . import _core
 from ._flow import flow
 from .errors import InvalidArgumentError
 
@@ -37,11 +50,10 @@ __all__ = [
     "FLOW_AUTO_MAX_POINTS",
     "FLOW_COLUMNS",
     "FLOW_LEVEL_COLUMNS",
+    "LevelFlows",
     "flow_axis_for",
-    "flow_columns",
     "flow_enabled",
     "flow_star",
-    "reference_permeability",
 ]
 
 #: ``flow=None`` computes the leak-rate columns on grids of at most this many points.
@@ -91,19 +103,119 @@ def flow_axis_for(flow_axis: Any, axis: Any) -> int:
     return int(flow_axis)
 
 
-def flow_columns(state: Any, flow_axis: int, enabled: bool = True) -> dict[str, float]:
-    """``{"Q": ..., "K": ...}`` of a solved contact state (NaN when not ``enabled``):
-    :func:`leakpath.flow` on the state along ``flow_axis`` with ``η = Δp = 1``."""
-    if not enabled:
-        return {"Q": math.nan, "K": math.nan}
-    f = flow(state, axis=flow_axis)
-    return {"Q": float(f.flow_rate), "K": float(f.permeability)}
+#: Flows queued or running at most before :meth:`LevelFlows.submit` computes one itself:
+#: bounds the states held when flows are slower than contact solves.
+MAX_PENDING = 3
 
 
-def reference_permeability(ref_state: Any, flow_axis: int, enabled: bool = True) -> float:
-    """``K(Δ = 0)``: the permeability of the undeformed state's gap (NaN when not
-    ``enabled``)."""
-    return flow_columns(ref_state, flow_axis, enabled)["K"]
+def _state_digest(state: Any) -> bytes:
+    """Digest of what a state's flow depends on within one sweep: its gap and contact mask."""
+    h = hashlib.blake2b(digest_size=16)
+    h.update(np.ascontiguousarray(state.gap, dtype=np.float64).tobytes())
+    h.update(np.packbits(np.asarray(state.contact, dtype=bool)).tobytes())
+    return h.digest()
+
+
+def _timed_columns(
+    state: Any, flow_axis: int, threads: int | None
+) -> tuple[dict[str, float], float]:
+    """``({"Q": …, "K": …}, seconds)`` of :func:`leakpath.flow` on ``state`` along
+    ``flow_axis`` with ``η = Δp = 1``."""
+    t0 = time.perf_counter()
+    f = flow(state, axis=flow_axis, threads=threads)
+    cols = {"Q": float(f.flow_rate), "K": float(f.permeability)}
+    return cols, time.perf_counter() - t0
+
+
+class LevelFlows:
+    """The leak-rate columns of a sweep's levels, computed beside its contact solves.
+
+    :meth:`submit` hands over a solved level; :meth:`finished` returns the levels whose
+    flow is done, in submission order; :meth:`finish` the rest, helping with the ones not
+    started; :meth:`close` stops (cancels what has not started). Each result is
+    ``(key, {"Q": …, "K": …}, seconds)`` (NaN columns when not ``enabled``), ``seconds`` the
+    flow's wall time. ``background=None``: on a background thread when the solvers have two
+    or more threads (:func:`leakpath._core.solver_threads`), else in :meth:`submit`.
+    """
+
+    def __init__(self, flow_axis: int, enabled: bool, background: bool | None = None) -> None:
+        self.flow_axis = flow_axis
+        self.enabled = enabled
+        if background is None:
+            background = enabled and _core.solver_threads() >= 2
+        self._pool = ThreadPoolExecutor(1, "leakpath-flow") if background else None
+        self._queue: deque[tuple[Hashable, Future[Any]]] = deque()
+        self._by_digest: dict[bytes, Future[Any]] = {}
+        self._states: dict[Future[Any], Any] = {}  # the inputs of flows queued on the pool
+
+    def _here(self, state: Any) -> Future[Any]:
+        """A flow computed on this thread (on all solver threads), as a done future."""
+        fut: Future[Any] = Future()
+        try:
+            fut.set_result(_timed_columns(state, self.flow_axis, None))
+        except BaseException as exc:  # re-raised where the result is taken
+            fut.set_exception(exc)
+        return fut
+
+    def submit(self, key: Hashable, state: Any) -> None:
+        """Queue the flow of ``state`` under ``key``."""
+        if not self.enabled:
+            fut: Future[Any] = Future()
+            fut.set_result(({"Q": math.nan, "K": math.nan}, 0.0))
+            self._queue.append((key, fut))
+            return
+        digest = _state_digest(state)
+        fut = self._by_digest.get(digest) or (
+            self._here(state)
+            if self._pool is None
+            else self._pool.submit(_timed_columns, state, self.flow_axis, 1)
+        )
+        if self._pool is not None and not fut.done():
+            self._states[fut] = state
+        self._by_digest[digest] = fut
+        self._queue.append((key, fut))
+        if len({id(f) for _, f in self._queue if not f.done()}) > MAX_PENDING:
+            self._help_one()
+
+    def _help_one(self) -> bool:
+        """Compute the newest flow not yet started here (the pool's thread takes the
+        oldest); False when every flow has started."""
+        for _, fut in reversed(self._queue):
+            if fut.cancel():
+                fresh = self._here(self._states.pop(fut))
+                self._queue = deque((k, fresh if f is fut else f) for k, f in self._queue)
+                self._by_digest = {
+                    d: fresh if f is fut else f for d, f in self._by_digest.items()
+                }
+                return True
+        return False
+
+    def _take(self) -> tuple[Hashable, dict[str, float], float]:
+        key, fut = self._queue.popleft()
+        self._states.pop(fut, None)
+        cols, seconds = fut.result()
+        return key, dict(cols), seconds
+
+    def finished(self) -> list[tuple[Hashable, dict[str, float], float]]:
+        """The results done so far, oldest first, up to the first one not done."""
+        out = []
+        while self._queue and self._queue[0][1].done():
+            out.append(self._take())
+        return out
+
+    def finish(self) -> list[tuple[Hashable, dict[str, float], float]]:
+        """All remaining results, oldest first."""
+        while self._help_one():
+            pass
+        return [self._take() for _ in range(len(self._queue))]
+
+    def close(self) -> None:
+        """Cancel what has not started and wait for a flow in progress."""
+        if self._pool is not None:
+            self._pool.shutdown(wait=True, cancel_futures=True)
+        self._queue.clear()
+        self._by_digest.clear()
+        self._states.clear()
 
 
 def flow_star(row: dict[str, Any], k_ref: float) -> float:
