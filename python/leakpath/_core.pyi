@@ -193,6 +193,7 @@ class ContactProblem:
         contact_set: npt.NDArray[np.int64] | None = None,
         tol: float = 1e-12,
         max_iter: int | None = None,
+        threads: int | None = None,
     ) -> ContactResult:
         """Solve at ``approach`` or at ``mean_pressure`` (exactly one; the exact solvers take
         the approach only). ``start``: ``"cold"`` (p = 0), ``"previous"`` (this problem's
@@ -201,7 +202,9 @@ class ContactProblem:
         its support ``p > 0``) or ``"set"`` with ``contact_set`` (flat indices; Polonsky–Keer
         starts cold). ``"auto"`` runs the block active set on grids of at most
         :data:`AUTO_ACTIVE_SET_MAX_POINTS` points in displacement control, Polonsky–Keer
-        otherwise; ``solver`` in the result names the one that ran."""
+        otherwise; ``solver`` in the result names the one that ran. ``threads``: run on a
+        pool of that many threads (1: the calling thread's own one-thread pool; default: the
+        solver pool); the result does not depend on it."""
 
 # ---- clusters ----
 def label_clusters(

@@ -177,6 +177,7 @@ def _solve_accepted(
     level: tuple[str, float],
     solver: str,
     warm: bool | np.ndarray,
+    threads: int | None = None,
 ) -> tuple[ContactState, int, int]:
     """Solve one level (``("approach", Δ)`` or ``("mean_pressure", p̄)``), and re-solve
     exactly from the returned contact set while ``kkt > KKT_ACCEPT``.
@@ -184,7 +185,9 @@ def _solve_accepted(
     Returns the state, the iterations summed over the solves and the number of re-solves.
     """
     kind, value = level
-    state = problem.solve(**{kind: value}, solver=solver, warm_start=warm)  # type: ignore[arg-type]
+    state = problem.solve(  # type: ignore[call-overload]
+        **{kind: value}, solver=solver, warm_start=warm, threads=threads
+    )
     approach = state.approach
     iterations = state.iterations
     restarts = 0
@@ -199,7 +202,9 @@ def _solve_accepted(
                 residual=state.kkt,
             )
         restart_solver = "active-set" if solver in ("polonsky-keer", "auto") else solver
-        state = problem.solve(approach, solver=restart_solver, warm_start=state.contact)  # type: ignore[arg-type]
+        state = problem.solve(  # type: ignore[arg-type]
+            approach, solver=restart_solver, warm_start=state.contact, threads=threads
+        )
         iterations += state.iterations
         restarts += 1
     return state, iterations, restarts
@@ -250,12 +255,13 @@ def _analyse(
     keep_fields: bool,
     t_start: float,
     keep_pressure: bool = False,
+    threads: int | None = None,
 ) -> _Level:
     """Row, masks and fields of a solved level (``t_start``: when its solve began), without
     the leak-rate columns (:class:`leakpath.leakage.LevelFlows` adds them)."""
-    p0 = state.percolation(axis=0, connectivity=connectivity)
-    p1 = state.percolation(axis=1, connectivity=connectivity)
-    pa = state.percolation(axis=axis, connectivity=connectivity)
+    p0 = state.percolation(axis=0, connectivity=connectivity, threads=threads)
+    p1 = state.percolation(axis=1, connectivity=connectivity, threads=threads)
+    pa = state.percolation(axis=axis, connectivity=connectivity, threads=threads)
     mom = nayak_moments(state.deformed, state.dx)
     n_contact = int(np.count_nonzero(state.contact))
     row: dict[str, Any] = {
@@ -482,6 +488,10 @@ def sweep(
     # Levels solved here whose leak rate is still being computed; saved once it is.
     waiting: dict[int, _Level] = {}
     flows = leakage.LevelFlows(flow_axis, flow_on)  # leakpath.leakage
+    # With the flows on a background thread, the contact solves and the cluster labelling
+    # take one thread of their own: two threads on two cores beside the flows' thread would
+    # keep preempting each other inside every parallel loop.
+    threads = 1 if flows.background else None
 
     def record(results: list[tuple[Any, dict[str, float], float]]) -> None:
         for key, cols, seconds in results:
@@ -518,7 +528,9 @@ def sweep(
                 if warm_start and done:
                     warm = _warm_start_for(done, level_list, k, shape)
                 t0 = time.perf_counter()
-                state, iterations, restarts = _solve_accepted(problem, target, run_solver, warm)
+                state, iterations, restarts = _solve_accepted(
+                    problem, target, run_solver, warm, threads
+                )
                 level = _analyse(
                     k,
                     state,
@@ -529,6 +541,7 @@ def sweep(
                     keep_fields=keep_fields,
                     t_start=t0,
                     keep_pressure=keep_pressure,
+                    threads=threads,
                 )
                 waiting[k] = level
                 flows.submit(k, state)

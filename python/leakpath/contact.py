@@ -161,14 +161,17 @@ class ContactState:
         """``ḡ = V / A0``."""
         return float(self.gap.mean())
 
-    def percolation(self, axis: Any = 0, connectivity: int = 4) -> Percolation:
-        """Percolation classes of the free region (see :func:`leakpath.percolation`)."""
+    def percolation(
+        self, axis: Any = 0, connectivity: int = 4, threads: int | None = None
+    ) -> Percolation:
+        """Percolation classes of the free region (see :func:`leakpath.percolation`;
+        ``threads`` does not change the result, so it is not part of the cache key)."""
         from ._percolation import percolation
 
         key = (axis, connectivity)
         cache = self.__dict__.setdefault("_percolation_cache", {})
         if key not in cache:
-            cache[key] = percolation(self, axis=axis, connectivity=connectivity)
+            cache[key] = percolation(self, axis=axis, connectivity=connectivity, threads=threads)
         return cache[key]
 
     @property
@@ -285,6 +288,7 @@ class ContactProblem:
         warm_start: bool | ContactState | np.ndarray | None = None,
         tol: float | None = None,
         max_iter: int | None = None,
+        threads: int | None = None,
     ) -> ContactState:
         """Solve the contact at an imposed approach ``Δ`` or an imposed mean pressure ``p̄``.
 
@@ -309,8 +313,14 @@ class ContactProblem:
         starts from its pressure, the exact solvers from its contact set); a float pressure
         field of the surface's shape likewise; a boolean contact mask (exact solvers: from
         that set; Polonsky–Keer: cold).
+
+        ``threads``: threads of the solve (default ``None``: all cores, or
+        ``RAYON_NUM_THREADS``); the result does not depend on it.
         """
         _validate.choice("solver", solver, SOLVERS)
+        threads = _validate.optional_integer(
+            "threads", threads, low=1, high=4096, what="a positive integer (at most 4096) or None"
+        )
         tol = DEFAULT_TOL if tol is None else _validate.positive("tol", tol)
         max_iter = _validate.optional_integer("max_iter", max_iter, low=1)
         if (approach is None) == (mean_pressure is None):
@@ -328,9 +338,9 @@ class ContactProblem:
                     "'polonsky-keer' with mean_pressure=",
                     argument="solver",
                 )
-            return self._solve(None, pbar, solver, warm_start, tol, max_iter)
+            return self._solve(None, pbar, solver, warm_start, tol, max_iter, threads)
         a = self._check_approach(approach)
-        return self._solve(a, None, solver, warm_start, tol, max_iter)
+        return self._solve(a, None, solver, warm_start, tol, max_iter, threads)
 
     def _check_warm_start(self, warm_start: Any) -> None:
         if warm_start is None or isinstance(warm_start, (bool, np.bool_, ContactState)):
@@ -374,6 +384,7 @@ class ContactProblem:
         warm_start: Any,
         tol: float,
         max_iter: int | None,
+        threads: int | None = None,
     ) -> ContactState:
         out = self._core.solve(
             approach=a,
@@ -381,6 +392,7 @@ class ContactProblem:
             solver=solver,
             tol=tol,
             max_iter=max_iter,
+            threads=threads,
             **self._start(warm_start),
         )
         state = self._state(out, out["solver"])

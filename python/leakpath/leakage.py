@@ -143,6 +143,8 @@ class LevelFlows:
         self.enabled = enabled
         if background is None:
             background = enabled and _core.solver_threads() >= 2
+        #: Whether the flows run on a background thread.
+        self.background = bool(background)
         self._pool = ThreadPoolExecutor(1, "leakpath-flow") if background else None
         self._queue: deque[tuple[Hashable, Future[Any]]] = deque()
         self._by_digest: dict[bytes, Future[Any]] = {}

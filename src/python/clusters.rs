@@ -5,7 +5,7 @@ use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray2, PyUntypedArray
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
-use super::pools::{check_threads, in_pool};
+use super::pools::{check_threads, pool_for, run_in};
 use super::{row_major, to_py};
 use crate::clusters::{self, Connectivity, ContactMask, Flow, FreeMask, Periodic, PositiveGap};
 use crate::error::Error;
@@ -47,7 +47,8 @@ pub(super) fn label_clusters<'py>(
     threads: Option<i64>,
 ) -> PyResult<(Bound<'py, PyArray2<u32>>, usize)> {
     let conn = Connectivity::from_neighbours(connectivity).map_err(to_py)?;
-    let threads = check_threads(threads)?;
+    // Resolved here, on the calling thread: a one-thread pool is that thread's own.
+    let pool = pool_for(check_threads(threads)?)?;
     let [ny, nx] = [free.shape()[0], free.shape()[1]];
     clusters::check_grid("free", ny, nx).map_err(to_py)?;
     let cells = row_major(&free);
@@ -58,10 +59,10 @@ pub(super) fn label_clusters<'py>(
         let mut rw = labels.readwrite();
         let out = rw.as_slice_mut()?;
         super::interruptible(py, |_| {
-            in_pool(threads, || {
+            run_in(&pool, || {
                 clusters::label_into(&FreeMask(cells), ny, nx, conn, per, out)
             })
-        })??
+        })?
         .map_err(to_py)?
     };
     Ok((labels, n))
@@ -91,7 +92,8 @@ pub(super) fn classify_clusters<'py>(
     let flow = Flow::parse(flow).map_err(to_py)?;
     let per = periodic(periodic_axis0, periodic_axis1);
     flow.check_periodic(per).map_err(to_py)?;
-    let threads = check_threads(threads)?;
+    // Resolved here, on the calling thread: a one-thread pool is that thread's own.
+    let pool = pool_for(check_threads(threads)?)?;
     let [ny, nx] = [gap.shape()[0], gap.shape()[1]];
     clusters::check_grid("gap", ny, nx).map_err(to_py)?;
     if let Some(c) = &contact {
@@ -115,7 +117,7 @@ pub(super) fn classify_clusters<'py>(
         let mut rw = labels.readwrite();
         let out = rw.as_slice_mut()?;
         super::interruptible(py, |_| {
-            in_pool(threads, || {
+            run_in(&pool, || {
                 let cl = match c {
                     Some(c) => {
                         clusters::analyze_into(&ContactMask(c), g, ny, nx, dx, conn, per, out)?
@@ -125,7 +127,7 @@ pub(super) fn classify_clusters<'py>(
                 let class = clusters::classify(&cl, flow)?;
                 Ok::<_, Error>((cl, class))
             })
-        })??
+        })?
         .map_err(to_py)?
     };
     let d = PyDict::new(py);

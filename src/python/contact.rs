@@ -8,6 +8,7 @@ use numpy::{
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
+use super::pools::{check_threads, pool_for};
 use super::{check_positive, to_py};
 use crate::alloc;
 use crate::contact::multilevel::CoarseCost;
@@ -185,7 +186,7 @@ impl ContactProblem {
     /// `contact_set` (flat indices).
     #[pyo3(signature = (
         approach=None, mean_pressure=None, solver="auto", start="cold",
-        initial_pressure=None, contact_set=None, tol=1e-12, max_iter=None
+        initial_pressure=None, contact_set=None, tol=1e-12, max_iter=None, threads=None
     ))]
     #[allow(clippy::too_many_arguments)]
     fn solve<'py>(
@@ -199,7 +200,9 @@ impl ContactProblem {
         contact_set: Option<PyReadonlyArray1<'_, i64>>,
         tol: f64,
         max_iter: Option<usize>,
+        threads: Option<i64>,
     ) -> PyResult<Bound<'py, PyDict>> {
+        let pool = pool_for(check_threads(threads)?)?;
         let control = match (approach, mean_pressure) {
             (Some(d), None) => Control::Approach(d),
             (None, Some(m)) => Control::MeanPressure(m),
@@ -286,7 +289,11 @@ impl ContactProblem {
                 max_iter,
                 should_stop: Some(&should_stop),
             };
-            let result = super::on_solver_pool(n, || work.solve(control, solver, start, &opts));
+            let run = || work.solve(control, solver, start, &opts);
+            let result = match &pool {
+                Some(p) => p.install(run),
+                None => super::on_solver_pool(n, run),
+            };
             (result, work)
         })?;
         self.inner.attach(work);

@@ -34,40 +34,73 @@ pub(crate) fn check_threads(threads: Option<i64>) -> PyResult<Option<usize>> {
     }
 }
 
-/// Runs `f` on a pool of `threads` threads, or on rayon's global pool. The `KEPT` most
-/// recently used pools are kept for later calls: starting threads per call would cost
-/// more than labelling a small grid, and their per-thread buffers would be lost each
-/// time. Older pools are dropped, which ends their threads, so calls with many different
-/// counts do not pile up threads.
+fn build(n: usize, name: &'static str) -> PyResult<Arc<rayon::ThreadPool>> {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(n)
+        .thread_name(move |i| format!("leakpath-{name}-{i}"))
+        .build()
+        .map(Arc::new)
+        .map_err(|e| PyRuntimeError::new_err(format!("cannot start {n} threads: {e}")))
+}
+
+/// The pool for `threads` threads (`None`: rayon's global pool, returned as `None`).
+///
+/// One thread: the calling thread's own pool, kept for its lifetime. Two Python threads
+/// that each ask for one thread (a sweep's contact solves and its flows on a background
+/// thread) then run side by side instead of queueing on one shared worker.
+///
+/// More threads: the `KEPT` most recently used pools are shared and kept for later calls:
+/// starting threads per call would cost more than labelling a small grid, and their
+/// per-thread buffers would be lost each time. Older pools are dropped, which ends their
+/// threads, so calls with many different counts do not pile up threads.
+pub(crate) fn pool_for(threads: Option<usize>) -> PyResult<Option<Arc<rayon::ThreadPool>>> {
+    const KEPT: usize = 2;
+    static POOLS: Mutex<Vec<(usize, Arc<rayon::ThreadPool>)>> = Mutex::new(Vec::new());
+    thread_local! {
+        static OWN: std::cell::OnceCell<Arc<rayon::ThreadPool>> =
+            const { std::cell::OnceCell::new() };
+    }
+    let Some(n) = threads else {
+        return Ok(None);
+    };
+    if n == 1 {
+        return OWN.with(|own| {
+            if let Some(p) = own.get() {
+                return Ok(Some(Arc::clone(p)));
+            }
+            let p = build(1, "own")?;
+            let _ = own.set(Arc::clone(&p));
+            Ok(Some(p))
+        });
+    }
+    // A panic elsewhere cannot leave the list inconsistent: keep using it.
+    let mut pools = POOLS.lock().unwrap_or_else(|e| e.into_inner());
+    let entry = match pools.iter().position(|(k, _)| *k == n) {
+        Some(i) => pools.remove(i),
+        None => (n, build(n, "pool")?),
+    };
+    let pool = Arc::clone(&entry.1);
+    pools.insert(0, entry);
+    pools.truncate(KEPT);
+    Ok(Some(pool))
+}
+
+/// Runs `f` on `pool`, or as called (rayon's global pool).
+pub(crate) fn run_in<T: Send>(
+    pool: &Option<Arc<rayon::ThreadPool>>,
+    f: impl FnOnce() -> T + Send,
+) -> T {
+    match pool {
+        Some(p) => p.install(f),
+        None => f(),
+    }
+}
+
+/// Runs `f` on the pool of [`pool_for`]`(threads)`, or as called (rayon's global pool). Call
+/// it on the thread that asked: a one-thread pool is that thread's own.
 pub(crate) fn in_pool<T: Send>(
     threads: Option<usize>,
     f: impl FnOnce() -> T + Send,
 ) -> PyResult<T> {
-    const KEPT: usize = 2;
-    static POOLS: Mutex<Vec<(usize, Arc<rayon::ThreadPool>)>> = Mutex::new(Vec::new());
-    let Some(n) = threads else {
-        return Ok(f());
-    };
-    let pool = {
-        // A panic elsewhere cannot leave the list inconsistent: keep using it.
-        let mut pools = POOLS.lock().unwrap_or_else(|e| e.into_inner());
-        let entry = match pools.iter().position(|(k, _)| *k == n) {
-            Some(i) => pools.remove(i),
-            None => {
-                let p = rayon::ThreadPoolBuilder::new()
-                    .num_threads(n)
-                    .thread_name(|i| format!("leakpath-pool-{i}"))
-                    .build()
-                    .map_err(|e| {
-                        PyRuntimeError::new_err(format!("cannot start {n} threads: {e}"))
-                    })?;
-                (n, Arc::new(p))
-            }
-        };
-        let pool = Arc::clone(&entry.1);
-        pools.insert(0, entry);
-        pools.truncate(KEPT);
-        pool
-    };
-    Ok(pool.install(f))
+    Ok(run_in(&pool_for(threads)?, f))
 }
