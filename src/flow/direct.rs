@@ -8,7 +8,8 @@
 //!
 //! # Ordering
 //!
-//! The fill-reducing order is approximate minimum degree (faer's AMD) on pieces of the grid:
+//! The fill-reducing order is approximate minimum degree (faer's AMD), on small pieces over
+//! 2 × 2 blocks of cells ([`BLOCK`]), on pieces of the grid:
 //! the grid is cut in two by its middle row (or, without wrap and wider than tall, its
 //! middle column), each half cut again ([`SPLIT_DEPTH`] times, pieces of at least
 //! [`SPLIT_MIN`] cells); the pieces are ordered independently, in parallel, and the
@@ -38,6 +39,18 @@ const SPLIT_DEPTH: usize = 1;
 
 /// Pieces with fewer cells than this are not cut further.
 const SPLIT_MIN: usize = 1 << 16;
+
+/// Side of the square blocks of cells the minimum-degree order is computed on, for pieces of
+/// at most [`BLOCK_MAX_CELLS`] cells (cell by cell above). On small grids faer's supernodal
+/// factorisation spends its time per supernode more than per flop: the order of 2 × 2 blocks,
+/// whose factor has 2.5× the entries of the cell-by-cell order, takes a quarter of the time
+/// to compute and its factor is no slower, so a flow at 97² to 129² takes 20–30 % less time
+/// (spectral H = 0.9 gaps at 0–13 % contact, and the levels of RMD sweeps). From 161² on
+/// the extra entries cost more than the blocks save (measured at 161², 193², 225², 257²).
+const BLOCK: usize = 2;
+
+/// Largest piece (cells of its rectangle) ordered by [`BLOCK`]-sized blocks.
+const BLOCK_MAX_CELLS: usize = 20_000;
 
 /// Iterative-refinement steps at most per right-hand side.
 const REFINE: usize = 4;
@@ -286,7 +299,10 @@ fn region_order(
 }
 
 /// Approximate-minimum-degree order of the unknowns in one rectangle of the grid (faces to
-/// cells outside it do not count: those cells are separators, eliminated later).
+/// cells outside it do not count: those cells are separators, eliminated later), computed on
+/// square blocks of cells ([`BLOCK`] on small rectangles, single cells otherwise): two blocks
+/// are neighbours when a face with positive conductance joins them, and each block's
+/// unknowns follow one another, row-major, at the block's place in the order.
 fn amd_region(
     st: &Stencil,
     index: &[usize],
@@ -295,47 +311,71 @@ fn amd_region(
     out: &mut Vec<usize>,
 ) {
     let nx = st.nx;
-    let w = c.1 - c.0;
+    let (h, w) = (r.1 - r.0, c.1 - c.0);
     let wrap = st.periodic && c == (0, nx) && nx > 2;
-    let mut local = vec![usize::MAX; (r.1 - r.0) * w];
-    let mut cells = Vec::new();
+    let blk = if h * w <= BLOCK_MAX_CELLS { BLOCK } else { 1 };
+    let (bh, bw) = (h.div_ceil(blk), w.div_ceil(blk));
+    let block_of = |i: usize, j: usize| ((i - r.0) / blk) * bw + (j - c.0) / blk;
+    // Blocks holding unknowns, numbered in raster order.
+    let mut number = vec![usize::MAX; bh * bw];
+    let mut blocks = Vec::new();
     for i in r.0..r.1 {
         for j in c.0..c.1 {
-            if index[i * nx + j] != usize::MAX {
-                local[(i - r.0) * w + (j - c.0)] = cells.len();
-                cells.push(i * nx + j);
+            let b = block_of(i, j);
+            if index[i * nx + j] != usize::MAX && number[b] == usize::MAX {
+                number[b] = 0;
             }
         }
     }
-    let n = cells.len();
+    for (b, slot) in number.iter_mut().enumerate() {
+        if *slot == 0 {
+            *slot = blocks.len();
+            blocks.push(b);
+        }
+    }
+    let n = blocks.len();
     if n == 0 {
         return;
     }
-    // Upper pattern (row < column) by columns: each unknown's neighbours of smaller local
-    // index, i.e. west and north, and for the last column its wrap partner in column 0.
-    let mut col_ptr = Vec::with_capacity(n + 1);
-    let mut row_idx = Vec::with_capacity(2 * n);
-    col_ptr.push(0usize);
-    for (q, &k) in cells.iter().enumerate() {
-        let (i, j) = (k / nx, k % nx);
-        let (li, lj) = (i - r.0, j - c.0);
-        let mut rows = [usize::MAX; 3];
-        if lj > 0 && st.e[k - 1] > 0.0 {
-            rows[0] = local[li * w + lj - 1];
-        }
-        if li > 0 && st.s[k - nx] > 0.0 {
-            rows[1] = local[(li - 1) * w + lj];
-        }
-        if wrap && j == nx - 1 && st.e[k] > 0.0 {
-            rows[2] = local[li * w];
-        }
-        rows.sort_unstable();
-        let mut last = usize::MAX;
-        for t in rows {
-            if t < q && t != last {
-                row_idx.push(t);
-                last = t;
+    // Block edges (lower, upper) from the faces inside the rectangle, and the wrap faces.
+    let mut edges = Vec::new();
+    for i in r.0..r.1 {
+        for j in c.0..c.1 {
+            let k = i * nx + j;
+            if index[k] == usize::MAX {
+                continue;
             }
+            let here = number[block_of(i, j)];
+            let mut join = |i2: usize, j2: usize| {
+                if index[i2 * nx + j2] != usize::MAX {
+                    let there = number[block_of(i2, j2)];
+                    if there != here {
+                        edges.push((here.min(there), here.max(there)));
+                    }
+                }
+            };
+            if j + 1 < c.1 && st.e[k] > 0.0 {
+                join(i, j + 1);
+            }
+            if i + 1 < r.1 && st.s[k] > 0.0 {
+                join(i + 1, j);
+            }
+            if wrap && j == nx - 1 && st.e[k] > 0.0 {
+                join(i, 0);
+            }
+        }
+    }
+    edges.sort_unstable_by_key(|&(lo, hi)| (hi, lo));
+    edges.dedup();
+    // Upper pattern (row < column) by columns.
+    let mut col_ptr = Vec::with_capacity(n + 1);
+    let mut row_idx = Vec::with_capacity(edges.len());
+    col_ptr.push(0usize);
+    let mut e = 0;
+    for q in 0..n {
+        while e < edges.len() && edges[e].1 == q {
+            row_idx.push(edges[e].0);
+            e += 1;
         }
         col_ptr.push(row_idx.len());
     }
@@ -353,10 +393,67 @@ fn amd_region(
         )
         .ok()
     });
-    if ordered.is_some() {
-        out.extend(perm.iter().map(|&q| index[cells[q]]));
-    } else {
-        // Cell order: more fill, never a wrong answer.
-        out.extend(cells.iter().map(|&k| index[k]));
+    if ordered.is_none() {
+        // Block order: more fill, never a wrong answer.
+        perm.iter_mut().enumerate().for_each(|(q, p)| *p = q);
+    }
+    for &q in &perm {
+        let b = blocks[q];
+        let (i0, j0) = (r.0 + (b / bw) * blk, c.0 + (b % bw) * blk);
+        for i in i0..(i0 + blk).min(r.1) {
+            for j in j0..(j0 + blk).min(c.1) {
+                let u = index[i * nx + j];
+                if u != usize::MAX {
+                    out.push(u);
+                }
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::flow::assemble::fine_stencil;
+
+    /// Cell conductances with about a third of the cells closed (a fixed pseudo-random mask).
+    fn conductances(ny: usize, nx: usize, seed: u64) -> Vec<f64> {
+        let mut s = seed;
+        (0..ny * nx)
+            .map(|_| {
+                s = s
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                let u = (s >> 11) as f64 / (1u64 << 53) as f64;
+                if u < 0.35 {
+                    0.0
+                } else {
+                    u
+                }
+            })
+            .collect()
+    }
+
+    #[test]
+    fn the_order_is_a_permutation_of_the_unknowns_with_and_without_blocks() {
+        // 7 × 9 and 40 × 30 are ordered by blocks, 150 × 150 cell by cell.
+        for &(ny, nx) in &[(7usize, 9usize), (40, 30), (150, 150), (1, 5)] {
+            for periodic in [false, true] {
+                let c = conductances(ny, nx, (ny * 1000 + nx) as u64);
+                let (st, _) = fine_stencil(&c, ny, nx, periodic);
+                let mut index = vec![usize::MAX; ny * nx];
+                let mut m = 0;
+                for (k, slot) in index.iter_mut().enumerate() {
+                    if st.active[k] {
+                        *slot = m;
+                        m += 1;
+                    }
+                }
+                let mut order = ordering(&st, &index, m);
+                assert_eq!(order.len(), m, "{ny}x{nx} periodic={periodic}");
+                order.sort_unstable();
+                assert!(order.iter().enumerate().all(|(q, &u)| q == u));
+            }
+        }
     }
 }
