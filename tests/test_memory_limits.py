@@ -215,3 +215,23 @@ print(ok, n, cap)
     assert n <= 2 * cap + (os.cpu_count() or 1) + 8, n
 
 
+
+
+def test_cgroup_headroom_follows_usage_at_every_call_and_limits_after_a_rescan(
+    tmp_path, monkeypatch
+):
+    inner, outer = tmp_path / "inner", tmp_path / "outer"
+    for d in (inner, outer):
+        d.mkdir()
+    (inner / "memory.max").write_text("max\n")  # no limit here
+    (outer / "memory.max").write_text(str(8 << 30))
+    (outer / "memory.current").write_text(str(3 << 30))
+    monkeypatch.setattr(_memory, "_own_cgroup_dirs", lambda: [inner, outer])
+    monkeypatch.setattr(_memory, "_limits_cache", None)
+    assert _memory._cgroup_headroom() == 5 << 30
+    (outer / "memory.current").write_text(str(6 << 30))
+    assert _memory._cgroup_headroom() == 2 << 30  # usage: read at every call
+    (inner / "memory.max").write_text(str(1 << 30))
+    (inner / "memory.current").write_text(str(1 << 29))
+    monkeypatch.setattr(_memory, "_RESCAN_SECONDS", 0.0)
+    assert _memory._cgroup_headroom() == 1 << 29  # a new limit: seen at the next rescan

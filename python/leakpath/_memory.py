@@ -14,13 +14,15 @@ leakpath refuses a problem before allocating it when its estimated size exceeds 
 
 Each term that does not apply (no cgroup limit, unlimited rlimit, not Linux) is left out;
 without any, 70 % of physical memory. The limit is computed at each call, so it follows what
-the process and its neighbours already use.
+the process and its neighbours already use (which cgroup limits exist is rescanned at most
+once a second).
 """
 
 from __future__ import annotations
 
 import os
 import resource
+import time
 from pathlib import Path
 
 __all__ = ["SAFETY", "THREAD_RESERVE", "memory_limit", "memory_headroom"]
@@ -82,19 +84,42 @@ def _own_cgroup_dirs() -> list[Path]:
     return dirs
 
 
-def _cgroup_headroom() -> int | None:
-    best: int | None = None
+#: Seconds between rescans of which cgroup memory limits apply (the usages are read at every
+#: call): listing the cgroups and probing every limit file costs ~0.15 ms, several times per
+#: level of a sweep, while a limit is set or lifted rarely.
+_RESCAN_SECONDS = 1.0
+
+_limits_cache: tuple[float, list[tuple[Path, Path]]] | None = None
+
+
+def _limit_files() -> list[tuple[Path, Path]]:
+    """(limit, usage) file pairs of this process's cgroups that set a limit, rescanned at
+    most every :data:`_RESCAN_SECONDS`."""
+    global _limits_cache
+    now = time.monotonic()
+    if _limits_cache is not None and now - _limits_cache[0] < _RESCAN_SECONDS:
+        return _limits_cache[1]
+    pairs = []
     for d in _own_cgroup_dirs():
         for limit_name, usage_name in (
             ("memory.max", "memory.current"),
             ("memory.limit_in_bytes", "memory.usage_in_bytes"),
         ):
-            limit = _read_int(d / limit_name)
-            if limit is None:
-                continue
-            usage = _read_int(d / usage_name) or 0
-            room = max(limit - usage, 0)
-            best = room if best is None else min(best, room)
+            if _read_int(d / limit_name) is not None:
+                pairs.append((d / limit_name, d / usage_name))
+    _limits_cache = (now, pairs)
+    return pairs
+
+
+def _cgroup_headroom() -> int | None:
+    best: int | None = None
+    for limit_path, usage_path in _limit_files():
+        limit = _read_int(limit_path)
+        if limit is None:
+            continue
+        usage = _read_int(usage_path) or 0
+        room = max(limit - usage, 0)
+        best = room if best is None else min(best, room)
     return best
 
 
