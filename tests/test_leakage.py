@@ -259,12 +259,13 @@ def test_level_flows_equal_each_flow_computed_alone(background):
         got = flows.finished() + flows.finish()
     finally:
         flows.close()
-    assert [key for key, _, _ in got] == [0, 1, 2, 3, 4, "again"]
-    for key, cols, seconds in got:
+    assert [key for key, _, _, _ in got] == [0, 1, 2, 3, 4, "again"]
+    for key, work, cols, seconds in got:
         want = _direct(states[0 if key == "again" else key])
         assert cols == want  # the same bits: the solver's result ignores its thread count
-        assert seconds >= 0
-    assert any(cols["Q"] > 0 for _, cols, _ in got)
+        assert work is None and seconds >= 0
+    assert got[-1][3] == 0.0  # the identical state was not solved again
+    assert any(cols["Q"] > 0 for _, _, cols, _ in got)
 
 
 def test_level_flows_switched_off_give_nan_without_solving(monkeypatch):
@@ -274,8 +275,9 @@ def test_level_flows_switched_off_give_nan_without_solving(monkeypatch):
     monkeypatch.setattr(leakage, "flow", refuse)
     flows = leakage.LevelFlows(0, False)
     flows.submit(0, _states(n=1)[0])
-    [(key, cols, seconds)] = flows.finish()
-    assert key == 0 and math.isnan(cols["Q"]) and math.isnan(cols["K"]) and seconds == 0.0
+    [(key, work, cols, seconds)] = flows.finish()
+    assert key == 0 and work is None and seconds == 0.0
+    assert math.isnan(cols["Q"]) and math.isnan(cols["K"])
 
 
 def test_queued_flows_are_helped_by_the_submitting_thread(monkeypatch):
@@ -296,15 +298,19 @@ def test_queued_flows_are_helped_by_the_submitting_thread(monkeypatch):
     flows = leakage.LevelFlows(0, True, background=True)
     try:
         for k, st in enumerate(states):
-            flows.submit(k, st)
+            # The work runs first in the same job, with the job's thread count.
+            flows.submit(k, st, lambda threads, k=k: (k, threads, threading.current_thread().name))
         got = flows.finish()
     finally:
         flows.close()
-    assert [k for k, _, _ in got] == list(range(6))
+    assert [k for k, _, _, _ in got] == list(range(6))
     assert threading.current_thread().name in where
     assert any(name.startswith("leakpath-flow") for name in where)
-    for k, cols, _ in got:
+    for k, work, cols, _ in got:
         assert cols == _direct(states[k])
+        assert work[0] == k
+        # One thread on the background thread, all solver threads where it was helped.
+        assert work[1] == (1 if work[2].startswith("leakpath-flow") else None)
 
 
 def test_a_failing_flow_stops_the_sweep_and_its_level_is_not_saved(tmp_path, monkeypatch):

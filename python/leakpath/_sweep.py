@@ -81,7 +81,7 @@ import os
 import sys
 import time
 import warnings
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -257,8 +257,8 @@ def _analyse(
     keep_pressure: bool = False,
     threads: int | None = None,
 ) -> _Level:
-    """Row, masks and fields of a solved level (``t_start``: when its solve began), without
-    the leak-rate columns (:class:`leakpath.leakage.LevelFlows` adds them)."""
+    """Row, masks and fields of a solved level (``seconds`` counted from ``t_start``),
+    without the leak-rate columns (:class:`leakpath.leakage.LevelFlows` adds them)."""
     p0 = state.percolation(axis=0, connectivity=connectivity, threads=threads)
     p1 = state.percolation(axis=1, connectivity=connectivity, threads=threads)
     pa = state.percolation(axis=axis, connectivity=connectivity, threads=threads)
@@ -493,14 +493,18 @@ def sweep(
     # keep preempting each other inside every parallel loop.
     threads = 1 if flows.background else None
 
-    def record(results: list[tuple[Any, dict[str, float], float]]) -> None:
-        for key, cols, seconds in results:
+    def record(results: list[tuple[Any, Any, dict[str, float], float]]) -> None:
+        for key, analysed, cols, seconds in results:
             if key == "reference":
                 reference["K"] = cols["K"]
                 continue
+            # The level in `done` (its pressure and mask started the next levels) takes the
+            # analysis made beside the contact solves.
             level = waiting.pop(key)
-            level.row.update(cols)
-            level.seconds += seconds
+            level.row = {**analysed.row, **cols}
+            level.classes = analysed.classes
+            level.fields = analysed.fields
+            level.seconds += analysed.seconds + seconds
             if checkpoint is not None:
                 checkpoint.save(key, level, shape)
             if bar is not None:
@@ -512,6 +516,24 @@ def sweep(
         for lv in done[:-2]:
             if id(lv) not in unsaved:
                 lv.pressure = None
+
+    def analysis(
+        k: int, state: ContactState, iterations: int, restarts: int
+    ) -> Callable[[int | None], _Level]:
+        def run(threads: int | None) -> _Level:
+            return _analyse(
+                k,
+                state,
+                iterations=iterations,
+                restarts=restarts,
+                axis=axis,
+                connectivity=connectivity,
+                keep_fields=keep_fields,
+                t_start=time.perf_counter(),
+                threads=threads,
+            )
+
+        return run
 
     try:
         flows.submit("reference", ref_state)
@@ -531,20 +553,19 @@ def sweep(
                 state, iterations, restarts = _solve_accepted(
                     problem, target, run_solver, warm, threads
                 )
-                level = _analyse(
-                    k,
-                    state,
-                    iterations=iterations,
-                    restarts=restarts,
-                    axis=axis,
-                    connectivity=connectivity,
-                    keep_fields=keep_fields,
-                    t_start=t0,
-                    keep_pressure=keep_pressure,
-                    threads=threads,
+                # What the next levels start from now; the row, class map and fields follow
+                # with the leak rate (`record`).
+                level = _Level(
+                    row={},
+                    seconds=time.perf_counter() - t0,
+                    mask=np.packbits(state.contact.ravel()),
+                    classes=np.zeros(0, dtype=np.int8),
+                    pressure=(
+                        np.array(state.pressure, dtype="<f8") if keep_pressure else None
+                    ),
                 )
                 waiting[k] = level
-                flows.submit(k, state)
+                flows.submit(k, state, analysis(k, state, iterations, restarts))
             done.append(level)
             record(flows.finished())
         record(flows.finish())

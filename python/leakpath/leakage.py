@@ -130,12 +130,15 @@ def _timed_columns(
 class LevelFlows:
     """The leak-rate columns of a sweep's levels, computed beside its contact solves.
 
-    :meth:`submit` hands over a solved level; :meth:`finished` returns the levels whose
-    flow is done, in submission order; :meth:`finish` the rest, helping with the ones not
-    started; :meth:`close` stops (cancels what has not started). Each result is
-    ``(key, {"Q": …, "K": …}, seconds)`` (NaN columns when not ``enabled``), ``seconds`` the
-    flow's wall time. ``background=None``: on a background thread when the solvers have two
-    or more threads (:func:`leakpath._core.solver_threads`), else in :meth:`submit`.
+    :meth:`submit` hands over a solved level, with optional other work on it (the sweep's
+    percolation and moments) to run first in the same job; :meth:`finished` returns the
+    levels whose job is done, in submission order; :meth:`finish` the rest, helping with the
+    ones not started; :meth:`close` stops (cancels what has not started). Each result is
+    ``(key, work's result, {"Q": …, "K": …}, seconds)`` (NaN columns when not ``enabled``),
+    ``seconds`` the flow's wall time. ``background=None``: on a background thread when the
+    solvers have two or more threads (:func:`leakpath._core.solver_threads`), else in
+    :meth:`submit`. A job on the background thread passes ``threads=1`` to its work and
+    flow; one run here passes ``None`` (all solver threads).
     """
 
     def __init__(self, flow_axis: int, enabled: bool, background: bool | None = None) -> None:
@@ -143,81 +146,89 @@ class LevelFlows:
         self.enabled = enabled
         if background is None:
             background = enabled and _core.solver_threads() >= 2
-        #: Whether the flows run on a background thread.
+        #: Whether the jobs run on a background thread.
         self.background = bool(background)
         self._pool = ThreadPoolExecutor(1, "leakpath-flow") if background else None
-        self._queue: deque[tuple[Hashable, Future[Any]]] = deque()
-        self._by_digest: dict[bytes, Future[Any]] = {}
-        self._states: dict[Future[Any], Any] = {}  # the inputs of flows queued on the pool
+        self._queue: deque[tuple[Hashable, Future[Any], bytes | None]] = deque()
+        self._jobs: dict[Future[Any], tuple[Any, Any, bool]] = {}  # inputs of queued jobs
+        self._seen: set[bytes] = set()  # digests of the states whose flow a job computes
+        self._cols: dict[bytes, dict[str, float]] = {}  # their columns, once taken
 
-    def _here(self, state: Any) -> Future[Any]:
-        """A flow computed on this thread (on all solver threads), as a done future."""
+    def _job(
+        self, state: Any, work: Any, solve: bool, threads: int | None
+    ) -> tuple[Any, dict[str, float] | None, float]:
+        out = None if work is None else work(threads)
+        if not self.enabled:
+            return out, {"Q": math.nan, "K": math.nan}, 0.0
+        if not solve:  # an identical state's flow: its columns are filled in when taken
+            return out, None, 0.0
+        cols, seconds = _timed_columns(state, self.flow_axis, threads)
+        return out, cols, seconds
+
+    def _here(self, state: Any, work: Any, solve: bool) -> Future[Any]:
+        """A job run on this thread (on all solver threads), as a done future."""
         fut: Future[Any] = Future()
         try:
-            fut.set_result(_timed_columns(state, self.flow_axis, None))
+            fut.set_result(self._job(state, work, solve, None))
         except BaseException as exc:  # re-raised where the result is taken
             fut.set_exception(exc)
         return fut
 
-    def submit(self, key: Hashable, state: Any) -> None:
-        """Queue the flow of ``state`` under ``key``."""
-        if not self.enabled:
-            fut: Future[Any] = Future()
-            fut.set_result(({"Q": math.nan, "K": math.nan}, 0.0))
-            self._queue.append((key, fut))
-            return
-        digest = _state_digest(state)
-        fut = self._by_digest.get(digest) or (
-            self._here(state)
-            if self._pool is None
-            else self._pool.submit(_timed_columns, state, self.flow_axis, 1)
-        )
-        if self._pool is not None and not fut.done():
-            self._states[fut] = state
-        self._by_digest[digest] = fut
-        self._queue.append((key, fut))
-        if len({id(f) for _, f in self._queue if not f.done()}) > MAX_PENDING:
+    def submit(self, key: Hashable, state: Any, work: Any = None) -> None:
+        """Queue the job of ``state`` under ``key``: ``work(threads)`` if given, then the
+        flow (once per distinct gap and contact mask)."""
+        digest = _state_digest(state) if self.enabled else None
+        solve = digest is not None and digest not in self._seen
+        if solve:
+            self._seen.add(digest)  # type: ignore[arg-type]
+        if self._pool is None:
+            fut = self._here(state, work, solve)
+        else:
+            fut = self._pool.submit(self._job, state, work, solve, 1)
+            self._jobs[fut] = (state, work, solve)
+        self._queue.append((key, fut, digest))
+        if sum(not f.done() for _, f, _ in self._queue) > MAX_PENDING:
             self._help_one()
 
     def _help_one(self) -> bool:
-        """Compute the newest flow not yet started here (the pool's thread takes the
-        oldest); False when every flow has started."""
-        for _, fut in reversed(self._queue):
+        """Run the newest job not yet started here (the pool's thread takes the oldest);
+        False when every job has started."""
+        for i in range(len(self._queue) - 1, -1, -1):
+            key, fut, digest = self._queue[i]
             if fut.cancel():
-                fresh = self._here(self._states.pop(fut))
-                self._queue = deque((k, fresh if f is fut else f) for k, f in self._queue)
-                self._by_digest = {
-                    d: fresh if f is fut else f for d, f in self._by_digest.items()
-                }
+                self._queue[i] = (key, self._here(*self._jobs.pop(fut)), digest)
                 return True
         return False
 
-    def _take(self) -> tuple[Hashable, dict[str, float], float]:
-        key, fut = self._queue.popleft()
-        self._states.pop(fut, None)
-        cols, seconds = fut.result()
-        return key, dict(cols), seconds
+    def _take(self) -> tuple[Hashable, Any, dict[str, float], float]:
+        key, fut, digest = self._queue.popleft()
+        self._jobs.pop(fut, None)
+        out, cols, seconds = fut.result()
+        if cols is None:
+            cols = self._cols[digest]  # type: ignore[index]
+        elif digest is not None:
+            self._cols[digest] = cols
+        return key, out, dict(cols), seconds
 
-    def finished(self) -> list[tuple[Hashable, dict[str, float], float]]:
+    def finished(self) -> list[tuple[Hashable, Any, dict[str, float], float]]:
         """The results done so far, oldest first, up to the first one not done."""
         out = []
         while self._queue and self._queue[0][1].done():
             out.append(self._take())
         return out
 
-    def finish(self) -> list[tuple[Hashable, dict[str, float], float]]:
+    def finish(self) -> list[tuple[Hashable, Any, dict[str, float], float]]:
         """All remaining results, oldest first."""
         while self._help_one():
             pass
         return [self._take() for _ in range(len(self._queue))]
 
     def close(self) -> None:
-        """Cancel what has not started and wait for a flow in progress."""
+        """Cancel what has not started and wait for a job in progress."""
         if self._pool is not None:
             self._pool.shutdown(wait=True, cancel_futures=True)
         self._queue.clear()
-        self._by_digest.clear()
-        self._states.clear()
+        self._jobs.clear()
 
 
 def flow_star(row: dict[str, Any], k_ref: float) -> float:
