@@ -6,8 +6,9 @@ Sections (``--only`` picks some; each writes its part of ``results/fast_defaults
     The paper's 20-level sweep (``Δ_k = k·h_s/20``, free boundary) on 129² surfaces: the RMD
     surface of the paper (D = 2.1, seed 0: 31 % contact at ``h_s``) and an RMD surface that
     reaches ≈ 50 % at ``h_s`` (seed 3), both scaled to unit rms height. leakpath's default
-    ``sweep(surface, levels=20)`` (solves, percolation along both axes, moments: the whole
-    table) against ContactMechanics ``FreeFFTElasticHalfSpace`` + ``minimize_proxy`` at
+    ``sweep(surface, levels=20)`` (solves, percolation along both axes, moments, leak rate:
+    the whole table; also without the leak rate) against ContactMechanics
+    ``FreeFFTElasticHalfSpace`` + ``minimize_proxy`` at
     tolerance 1e-8·h_s for the 20 solves alone; also leakpath's cold replay
     (``warm_start=False``) and the former default (Polonsky–Keer to 1e-9, then an exact
     active-set finish from its contact set). Exactness: every level of the default sweep is
@@ -116,18 +117,21 @@ def section_sweep(repeats: int) -> list[str]:
     lines = ["## The paper's 20-level sweep, 129², free boundary", ""]
     lines.append(
         "Times are medians of "
-        f"{repeats} runs. leakpath `sweep()` is the whole table (20 solves + the Δ = 0 "
-        "reference, percolation along both axes, moments); ContactMechanics is the 20 solves "
+        f"{repeats} runs. leakpath `sweep()` is the whole default table (20 solves + the Δ = 0 "
+        "reference, percolation along both axes, moments, and the leak rate Q, K, K* of "
+        "every level: 21 sparse Cholesky flow solves); `flow=False` is the same table without "
+        "the leak rate; ContactMechanics is the 20 solves "
         "alone (tolerance 1e-8·h_s, every level from its default start)."
     )
     lines.append("")
     lines.append(
         "| surface | contact at h_s | ContactMechanics 1.8.3 | leakpath `sweep()` default | "
-        "speed-up | cold replay (`warm_start=False`) | former default (PK 1e-9 + active-set "
+        "speed-up | `sweep(flow=False)` | cold replay (`warm_start=False`) | former default "
+        "(PK 1e-9 + active-set "
         "finish) | default solves alone: time, iterations, FFT products, preconditioner "
         "FFTs | same contact sets as the exact solver | max rel. diff. free volume |"
     )
-    lines.append("|---|---|---|---|---|---|---|---|---|---|")
+    lines.append("|---|---|---|---|---|---|---|---|---|---|---|")
     for name, s in (
         ("RMD D=2.1 seed 3 (≈ 50 %)", leakpath.rmd(7, 2.1, seed=3)),
         ("RMD D=2.1 seed 0 (the paper's)", leakpath.rmd(7, 2.1, seed=0)),
@@ -141,6 +145,11 @@ def section_sweep(repeats: int) -> list[str]:
             t0 = time.perf_counter()
             res = leakpath.sweep(surf, levels=20)
             t_default.append(time.perf_counter() - t0)
+        t_noflow = []
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            leakpath.sweep(surf, levels=20, flow=False)
+            t_noflow.append(time.perf_counter() - t0)
         t_cold = []
         for _ in range(repeats):
             t0 = time.perf_counter()
@@ -180,7 +189,8 @@ def section_sweep(repeats: int) -> list[str]:
             cm_text, speed = "—", "—"
         lines.append(
             f"| {name} | {frac:.3f} | {cm_text} | {statistics.median(t_default):.3f} s | "
-            f"{speed} | {statistics.median(t_cold):.3f} s | {t_former:.2f} s | "
+            f"{speed} | {statistics.median(t_noflow):.3f} s | "
+            f"{statistics.median(t_cold):.3f} s | {t_former:.2f} s | "
             f"{t_solves:.3f} s, {its}, {applies}, {pre} | {'yes' if same else 'NO'} | "
             f"{worst:.1e} |"
         )
