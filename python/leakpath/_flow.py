@@ -348,9 +348,7 @@ def flow(
             f"solver: must be 'auto', 'cholesky' or 'multigrid', got {solver!r}",
             argument="solver",
         )
-    threads = _validate.optional_integer(
-        "threads", threads, low=1, high=4096, what="a positive integer (at most 4096) or None"
-    )
+    threads = _validate.threads(threads)
     limit = default_memory_limit() if memory_limit is None else int(memory_limit)
     res = _core.solve_reynolds_flow(
         gap,

@@ -180,9 +180,7 @@ def percolation(
     """
     flow, axis_used = _flow(axis)
     conn = _validate.connectivity(connectivity)
-    threads = _validate.optional_integer(
-        "threads", threads, low=1, high=4096, what="a positive integer (at most 4096) or None"
-    )
+    threads = _validate.threads(threads)
 
     boundary = None
     if _is_state(state_or_gap):
@@ -312,9 +310,7 @@ def label(
         )
     wrap0 = _validate.flag("periodic", periodic[0])
     wrap1 = _validate.flag("periodic", periodic[1])
-    threads = _validate.optional_integer(
-        "threads", threads, low=1, high=4096, what="a positive integer (at most 4096) or None"
-    )
+    threads = _validate.threads(threads)
     labels, k = _core.label_clusters(
         np.ascontiguousarray(mask),
         connectivity=conn,

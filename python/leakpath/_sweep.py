@@ -82,7 +82,7 @@ import sys
 import time
 import warnings
 from collections.abc import Callable, Sequence
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
@@ -250,6 +250,15 @@ def _percolation_columns(perc: Percolation, suffix: str) -> dict[str, Any]:
     }
 
 
+class _Analysis(NamedTuple):
+    """What :func:`_analyse` adds to a solved level."""
+
+    row: dict[str, Any]
+    classes: np.ndarray
+    fields: dict[str, np.ndarray] | None
+    seconds: float
+
+
 def _analyse(
     k: int,
     state: ContactState,
@@ -259,12 +268,11 @@ def _analyse(
     axis: Any,
     connectivity: int,
     keep_fields: bool,
-    t_start: float,
-    keep_pressure: bool = False,
     threads: int | None = None,
-) -> _Level:
-    """Row, masks and fields of a solved level (``seconds`` counted from ``t_start``),
-    without the leak-rate columns (:class:`leakpath.leakage.LevelFlows` adds them)."""
+) -> _Analysis:
+    """Row, class map and fields of a solved level, without the leak-rate columns
+    (:class:`leakpath.leakage.LevelFlows` adds them)."""
+    t_start = time.perf_counter()
     p0 = state.percolation(axis=0, connectivity=connectivity, threads=threads)
     p1 = state.percolation(axis=1, connectivity=connectivity, threads=threads)
     pa = state.percolation(axis=axis, connectivity=connectivity, threads=threads)
@@ -300,14 +308,7 @@ def _analyse(
             "gap": np.array(state.gap, dtype=np.float64),
             "labels": np.asarray(pa.labels, dtype=np.int32),
         }
-    return _Level(
-        row=row,
-        seconds=time.perf_counter() - t_start,
-        mask=np.packbits(state.contact.ravel()),
-        classes=classes,
-        fields=fields,
-        pressure=np.array(state.pressure, dtype="<f8") if keep_pressure else None,
-    )
+    return _Analysis(row, classes, fields, time.perf_counter() - t_start)
 
 
 # ---------------------------------------------------------------------------- checkpoints
@@ -529,8 +530,8 @@ def sweep(
 
     def analysis(
         k: int, state: ContactState, iterations: int, restarts: int
-    ) -> Callable[[int | None], _Level]:
-        def run(threads: int | None) -> _Level:
+    ) -> Callable[[int | None], _Analysis]:
+        def run(threads: int | None) -> _Analysis:
             return _analyse(
                 k,
                 state,
@@ -539,7 +540,6 @@ def sweep(
                 axis=axis,
                 connectivity=connectivity,
                 keep_fields=keep_fields,
-                t_start=time.perf_counter(),
                 threads=threads,
             )
 

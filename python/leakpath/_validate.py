@@ -192,6 +192,13 @@ def optional_integer(name: str, value: Any, **kwargs: Any) -> int | None:
     return None if value is None else integer(name, value, **kwargs)
 
 
+def threads(value: Any) -> int | None:
+    """``threads=``: ``None`` (all solver threads) or a count from 1 to 4096."""
+    return optional_integer(
+        "threads", value, low=1, high=4096, what="a positive integer (at most 4096) or None"
+    )
+
+
 def flag(name: str, value: Any) -> bool:
     """``True`` or ``False`` (numpy bools too); nothing else."""
     if isinstance(value, (bool, np.bool_)):

@@ -318,9 +318,7 @@ class ContactProblem:
         ``RAYON_NUM_THREADS``); the result does not depend on it.
         """
         _validate.choice("solver", solver, SOLVERS)
-        threads = _validate.optional_integer(
-            "threads", threads, low=1, high=4096, what="a positive integer (at most 4096) or None"
-        )
+        threads = _validate.threads(threads)
         tol = DEFAULT_TOL if tol is None else _validate.positive("tol", tol)
         max_iter = _validate.optional_integer("max_iter", max_iter, low=1)
         if (approach is None) == (mean_pressure is None):
