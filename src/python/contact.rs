@@ -8,7 +8,7 @@ use numpy::{
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
-use super::pools::{check_threads, pool_for};
+use super::pools::{check_threads, pool_for, run_solve};
 use super::{check_positive, to_py};
 use crate::alloc;
 use crate::contact::multilevel::CoarseCost;
@@ -289,11 +289,7 @@ impl ContactProblem {
                 max_iter,
                 should_stop: Some(&should_stop),
             };
-            let run = || work.solve(control, solver, start, &opts);
-            let result = match &pool {
-                Some(p) => p.install(run),
-                None => super::on_solver_pool(n, run),
-            };
+            let result = run_solve(&pool, n, || work.solve(control, solver, start, &opts));
             (result, work)
         })?;
         self.inner.attach(work);

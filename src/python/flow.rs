@@ -4,7 +4,7 @@ use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray2, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
-use super::pools::{check_threads, in_pool};
+use super::pools::{check_threads, pool_for, run_solve};
 use super::{row_major, to_py};
 use crate::error::Error;
 use crate::flow::{self, Options, Problem};
@@ -33,7 +33,7 @@ pub(super) fn solve_reynolds_flow<'py>(
     threads: Option<i64>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let solver = flow::Solver::parse(solver).map_err(to_py)?;
-    let threads = check_threads(threads)?;
+    let pool = pool_for(check_threads(threads)?)?;
     let [ny, nx] = [gap.shape()[0], gap.shape()[1]];
     if let Some(c) = &contact {
         if c.shape() != gap.shape() {
@@ -74,13 +74,8 @@ pub(super) fn solve_reynolds_flow<'py>(
                 memory_limit,
                 should_stop: Some(&stop),
             };
-            match threads {
-                Some(_) => in_pool(threads, || flow::solve(&problem, &opts)),
-                None => Ok(super::on_solver_pool(ny * nx, || {
-                    flow::solve(&problem, &opts)
-                })),
-            }
-        })?
+            run_solve(&pool, ny * nx, || flow::solve(&problem, &opts))
+        })
         .map_err(to_py)?;
     let seconds = start.elapsed().as_secs_f64();
     let d = PyDict::new(py);

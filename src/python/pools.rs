@@ -45,7 +45,8 @@ fn build(n: usize, name: &'static str) -> PyResult<Arc<rayon::ThreadPool>> {
 
 /// The pool for `threads` threads (`None`: rayon's global pool, returned as `None`).
 ///
-/// One thread: the calling thread's own pool, kept for its lifetime. Two Python threads
+/// One thread: the calling thread's own pool, kept for its lifetime (so call this on the
+/// Python thread, before the work moves to a worker thread). Two Python threads
 /// that each ask for one thread (a sweep's contact solves and its flows on a background
 /// thread) then run side by side instead of queueing on one shared worker.
 ///
@@ -96,11 +97,15 @@ pub(crate) fn run_in<T: Send>(
     }
 }
 
-/// Runs `f` on the pool of [`pool_for`]`(threads)`, or as called (rayon's global pool). Call
-/// it on the thread that asked: a one-thread pool is that thread's own.
-pub(crate) fn in_pool<T: Send>(
-    threads: Option<usize>,
+/// Runs a solve of `cells` cells on `pool`, or on the solver pool
+/// ([`super::on_solver_pool`]) when none was asked for.
+pub(crate) fn run_solve<T: Send>(
+    pool: &Option<Arc<rayon::ThreadPool>>,
+    cells: usize,
     f: impl FnOnce() -> T + Send,
-) -> PyResult<T> {
-    Ok(run_in(&pool_for(threads)?, f))
+) -> T {
+    match pool {
+        Some(p) => p.install(f),
+        None => super::on_solver_pool(cells, f),
+    }
 }
