@@ -855,3 +855,30 @@ fn auto_uses_the_multigrid_when_the_factor_does_not_fit() {
     };
     assert!(matches!(solve(&pr, &chol), Err(Error::TooLarge { .. })));
 }
+
+#[test]
+fn the_order_is_a_permutation_of_the_unknowns_with_and_without_blocks() {
+    // 7 × 9 and 40 × 30 are ordered by 2 × 2 blocks, 150 × 150 cell by cell; about a third
+    // of the cells closed.
+    for &(ny, nx) in &[(7usize, 9usize), (40, 30), (150, 150), (1, 5)] {
+        for periodic in [false, true] {
+            let c: Vec<f64> = lcg((ny * 1000 + nx) as u64, ny * nx)
+                .into_iter()
+                .map(|u| if u < 0.35 { 0.0 } else { u })
+                .collect();
+            let (st, _) = assemble::fine_stencil(&c, ny, nx, periodic);
+            let mut index = vec![usize::MAX; ny * nx];
+            let mut m = 0;
+            for (k, slot) in index.iter_mut().enumerate() {
+                if st.active[k] {
+                    *slot = m;
+                    m += 1;
+                }
+            }
+            let mut order = direct::ordering(&st, &index, m);
+            assert_eq!(order.len(), m, "{ny}x{nx} periodic={periodic}");
+            order.sort_unstable();
+            assert!(order.iter().enumerate().all(|(q, &u)| q == u));
+        }
+    }
+}
