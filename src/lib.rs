@@ -7,6 +7,7 @@
 pub mod alloc;
 pub mod clusters;
 pub mod contact;
+pub mod dense_scratch;
 pub mod elastic;
 pub mod error;
 pub mod flow;

@@ -289,3 +289,8 @@ def solve_reynolds_flow(
 
 def solver_threads() -> int:
     """Threads of the pool the solvers run on: all cores, or ``RAYON_NUM_THREADS``."""
+
+def dense_scratch_bytes() -> int:
+    """Bytes of the packing scratch the dense matrix products (active-set Cholesky updates,
+    the flow's sparse factor) allocate once per thread: twice the last-level cache this CPU
+    reports. Checked with a fallible reservation before a thread's first such product."""

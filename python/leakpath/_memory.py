@@ -9,8 +9,15 @@ leakpath refuses a problem before allocating it when its estimated size exceeds 
                  MemAvailable)                             (/proc/meminfo)
     − THREAD_RESERVE × (CPUs + 1)
 
-``THREAD_RESERVE`` is the packing buffer the dense linear algebra allocates once per thread
-(64 MiB), which no estimate of a problem's size includes.
+``THREAD_RESERVE`` (64 MiB a thread) covers what each computing thread allocates besides a
+problem's own buffers: its stack, its allocator arena and small per-call buffers.
+
+The packing scratch of the dense matrix products (``_core.dense_scratch_bytes()``: twice the
+last-level cache the CPU reports, from 2 × 2 MiB to 2 × 260 MiB and more on some server CPUs,
+allocated once per thread that runs the active-set or flow factorisations) is not part of
+this limit: it depends on the CPU, not on the problem, and the Rust core reserves it
+fallibly before a thread's first such product, so a machine without room for it refuses
+with :class:`~leakpath.errors.ProblemTooLargeError` instead of aborting.
 
 Each term that does not apply (no cgroup limit, unlimited rlimit, not Linux) is left out;
 without any, 70 % of physical memory. The limit is computed at each call, so it follows what
@@ -31,7 +38,8 @@ __all__ = ["SAFETY", "THREAD_RESERVE", "memory_limit", "memory_headroom"]
 #: and the rest of the program (and numpy's copies of the results) needs room too.
 SAFETY = 0.8
 
-#: Bytes each computing thread may allocate besides the problem's own buffers.
+#: Bytes each computing thread may allocate besides the problem's own buffers (stack,
+#: allocator arena, small buffers); the dense products' CPU-sized scratch is checked apart.
 THREAD_RESERVE = 64 << 20
 
 _UNLIMITED = 1 << 62

@@ -39,6 +39,7 @@ use rayon::prelude::*;
 
 use crate::alloc;
 use crate::contact::kkt::kkt_certificate;
+use crate::dense_scratch;
 use crate::elastic::kernel::Kernel;
 use crate::elastic::memory;
 use crate::elastic::operator::Operator;
@@ -89,6 +90,9 @@ pub struct Factor {
     /// and a solve then only forward-substitutes the new rows.
     fwd: Vec<f64>,
     fwd_ok: usize,
+    /// The threads the dense products run on have their packing scratch
+    /// ([`dense_scratch::ensure`]).
+    scratch_ready: bool,
 }
 
 struct Tail {
@@ -110,6 +114,7 @@ impl Factor {
             tail: None,
             fwd: Vec::new(),
             fwd_ok: 0,
+            scratch_ready: false,
         })
     }
 
@@ -206,6 +211,12 @@ impl Factor {
                 ),
             });
         }
+        if !self.scratch_ready && (k + nb).pow(3) > dense_scratch::UNPACKED_PRODUCT {
+            // Before the first packed product: a refusal, not an abort, when the CPU-sized
+            // scratch does not fit.
+            dense_scratch::ensure(Par::rayon(DENSE_TASKS))?;
+            self.scratch_ready = true;
+        }
         let mut r = kernel.cross_block(&self.idx, new)?;
         if k > 0 {
             let rm = MatMut::from_column_major_slice_mut(&mut r, k, nb);
@@ -254,11 +265,10 @@ impl Factor {
     fn write_tail(&mut self, k: usize, new: &[usize], r: &[f64], mut ljj: Mat<f64>) -> Result<()> {
         let nb = new.len();
         let par = par_for(nb * nb);
-        let mut mem = MemBuffer::new(cholesky_in_place_scratch::<f64>(
-            nb,
-            par,
-            Default::default(),
-        ));
+        let what = format!("the scratch of a {nb}-point Cholesky update");
+        let req = cholesky_in_place_scratch::<f64>(nb, par, Default::default());
+        let mut mem =
+            MemBuffer::try_new(req).map_err(|_| alloc::refused(req.size_bytes() as u64, &what))?;
         cholesky_in_place(
             ljj.as_mut(),
             Default::default(),

@@ -125,6 +125,11 @@ impl Factor {
                 });
             }
         }
+        if m > 16 {
+            // The supernodes' dense products: a refusal, not an abort, when their CPU-sized
+            // scratch does not fit.
+            crate::dense_scratch::ensure(par)?;
+        }
         let mut values = Vec::new();
         values
             .try_reserve_exact(symbolic.len_val())

@@ -226,6 +226,12 @@ fn solver_threads() -> usize {
     rayon::current_num_threads()
 }
 
+/// Bytes of the packing scratch faer's dense products allocate once per thread on this CPU.
+#[pyfunction]
+fn dense_scratch_bytes() -> u64 {
+    crate::dense_scratch::bytes_per_thread()
+}
+
 #[pymodule]
 #[pyo3(name = "_core")]
 fn core_module(m: &Bound<'_, PyModule>) -> PyResult<()> {
@@ -241,5 +247,6 @@ fn core_module(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(contact::pk_py::solve_polonsky_keer, m)?)?;
     m.add_function(wrap_pyfunction!(flow::solve_reynolds_flow, m)?)?;
     m.add_function(wrap_pyfunction!(solver_threads, m)?)?;
+    m.add_function(wrap_pyfunction!(dense_scratch_bytes, m)?)?;
     Ok(())
 }
