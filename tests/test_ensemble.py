@@ -564,3 +564,65 @@ class TestArguments:
         err = capsys.readouterr().err.strip().splitlines()
         assert code == 2 and len(err) == 1 and "--overwrite" in err[0]
         assert (tmp_path / "o" / "notes.txt").read_text() == "mine"
+
+
+# ---------------------------------------------------------------------------- integrity
+class DiesOnSeed:
+    """A picklable rmd generator whose worker process dies on one seed while ``marker``
+    exists (``os._exit(3)``, or SIGKILL with ``signal=True``); the same surfaces otherwise.
+    One ``repr`` for every instance: runs with and without the marker are one ensemble."""
+
+    def __init__(self, seed: int, marker: Path, signal: bool = False):
+        self.seed, self.marker, self.signal = seed, str(marker), signal
+
+    def __call__(self, *, seed, m, D):
+        if seed == self.seed and os.path.exists(self.marker):
+            if self.signal:
+                os.kill(os.getpid(), signal.SIGKILL)
+            os._exit(3)
+        return leakpath.rmd(m, D, seed=seed)
+
+    def __repr__(self) -> str:
+        return "DiesOnSeed"
+
+
+class TestDyingWorkers:
+    def test_a_seed_that_kills_its_worker_fails_alone(self, reference, tmp_path):
+        """Seed 2 ends its worker process (os._exit) in both parameter sets: every other task
+        is saved as the reference computed it, the failure names seed 2 and the reason, and a
+        resume (the generator healthy again) runs only the two seed-2 tasks."""
+        marker = tmp_path / "sick"
+        marker.touch()
+        out = tmp_path / "run"
+        gen = DiesOnSeed(2, marker)
+        kwargs = dict(generator=gen, params=PARAMS, surfaces=SURFACES, levels=LEVELS, out=out,
+                      workers=2, retries=1, progress=False, figures=False)
+        with pytest.raises(RuntimeError) as info:
+            ensemble(**kwargs)
+        message = str(info.value)
+        assert message.startswith(f"2 of {2 * SURFACES} task(s) failed")
+        for key in KEYS:
+            assert f"{key}/seed-2: its worker process exited with status 3" in message
+        saved = task_files(out)
+        expected = {f"tasks/{k}/seed-{s}.csv" for k in KEYS for s in range(SURFACES) if s != 2}
+        assert set(saved) == expected
+        for rel in expected:  # the same surfaces as the rmd generator's: the same tables
+            assert (out / rel).read_bytes() == (reference.directory / rel).read_bytes()
+
+        marker.unlink()
+        resumed = ensemble(**kwargs, resume=True)
+        assert sorted(map(tuple, resumed.run["ran"])) == [(k, 2) for k in KEYS]
+        assert resumed.run["tasks_resumed"] == 2 * SURFACES - 2
+        assert {p: task_files(out)[p] for p in saved} == saved  # untouched
+        assert resumed.aggregate_path.read_bytes() == reference.aggregate_path.read_bytes()
+        assert resumed.thresholds_path.read_bytes() == reference.thresholds_path.read_bytes()
+
+    def test_a_seed_killed_by_a_signal_is_reported(self, tmp_path):
+        marker = tmp_path / "sick"
+        marker.touch()
+        out = tmp_path / "run"
+        with pytest.raises(RuntimeError, match=r"D=2.3_m=3/seed-1: .*killed by SIGKILL"):
+            ensemble(generator=DiesOnSeed(1, marker, signal=True), params={"D": 2.3, "m": 3},
+                     surfaces=3, levels=2, out=out, workers=2, retries=0, progress=False,
+                     figures=False)
+        assert set(task_files(out)) == {f"tasks/D=2.3_m=3/seed-{s}.csv" for s in (0, 2)}

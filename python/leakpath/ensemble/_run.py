@@ -164,8 +164,9 @@ def ensemble(
         single-threaded task per core, reproducible across executors; for Dask the default
         also respects a ``RAYON_NUM_THREADS`` already set in the workers' environment.
     retries : int
-        Dask: ``retries`` of a failed task; processes: consecutive broken pools tolerated
-        without any task finishing.
+        Dask: ``retries`` of a failed task; processes: how often a task whose worker process
+        died is run again (after a worker dies, the unfinished tasks run one process each,
+        so that a task that kills its worker fails alone and the others are saved).
     resume : bool
         Skip tasks whose table exists in ``DIR``; run only the missing ones.
     overwrite : bool
