@@ -240,12 +240,14 @@ class _Driver:
     def __init__(
         self,
         out: Path,
+        run_id: str,
         total: int,
         done_before: int,
         progress: bool,
         stop_after: int | None = None,
     ):
         self.out = out
+        self.run_id = run_id
         self.written: list[tuple[str, int]] = []
         self.failed: list[tuple[str, int, str]] = []
         self.compute_seconds = 0.0
@@ -265,7 +267,7 @@ class _Driver:
             )
 
     def done(self, result: _TaskOutput) -> None:
-        _write_task(self.out, result)
+        _write_task(self.out, result, self.run_id)
         self.written.append((result.key, result.seed))
         self.compute_seconds += result.seconds
         if self.bar is not None:
