@@ -564,3 +564,177 @@ class TestArguments:
         err = capsys.readouterr().err.strip().splitlines()
         assert code == 2 and len(err) == 1 and "--overwrite" in err[0]
         assert (tmp_path / "o" / "notes.txt").read_text() == "mine"
+
+
+# ---------------------------------------------------------------------------- integrity
+class DiesOnSeed:
+    """A picklable rmd generator whose worker process dies on one seed while ``marker``
+    exists (``os._exit(3)``, or SIGKILL with ``signal=True``); the same surfaces otherwise.
+    One ``repr`` for every instance: runs with and without the marker are one ensemble."""
+
+    def __init__(self, seed: int, marker: Path, signal: bool = False):
+        self.seed, self.marker, self.signal = seed, str(marker), signal
+
+    def __call__(self, *, seed, m, D):
+        if seed == self.seed and os.path.exists(self.marker):
+            if self.signal:
+                os.kill(os.getpid(), signal.SIGKILL)
+            os._exit(3)
+        return leakpath.rmd(m, D, seed=seed)
+
+    def __repr__(self) -> str:
+        return "DiesOnSeed"
+
+
+def copy_of(reference, tmp_path: Path) -> Path:
+    import shutil
+
+    copy = tmp_path / "copy"
+    shutil.copytree(reference.directory, copy)
+    return copy
+
+
+class TestIntegrity:
+    def test_edited_table_is_refused_then_recomputed(self, reference, tmp_path):
+        """A task table edited after the run: aggregate refuses it (naming it); resume
+        recomputes only that task and restores the reference table and aggregate."""
+        copy = copy_of(reference, tmp_path)
+        path = copy / "tasks" / KEYS[0] / "seed-1.csv"
+        text = path.read_text()
+        rows = read_csv(path)
+        old = rows[2]["contact_fraction"]
+        assert old in text
+        path.write_text(text.replace(old, "0.5", 1))  # a plausible, wrong value
+        with pytest.raises(ValueError, match="checksum") as info:
+            aggregate(copy, figures=False)
+        assert str(path) in str(info.value) and "resume" in str(info.value)
+
+        with pytest.warns(RuntimeWarning, match=f"{KEYS[0]}/seed-1 .*checksum"):
+            again = run_ensemble(copy, workers=2, resume=True)
+        assert again.run["ran"] == [[KEYS[0], 1]]
+        assert [r[:2] for r in again.run["recomputed"]] == [[KEYS[0], 1]]
+        assert path.read_bytes() == (reference.directory / path.relative_to(copy)).read_bytes()
+        assert again.aggregate_path.read_bytes() == reference.aggregate_path.read_bytes()
+
+    def test_edited_metadata_and_swapped_tasks_are_recomputed(self, reference, tmp_path):
+        copy = copy_of(reference, tmp_path)
+        meta = copy / "tasks" / KEYS[1] / "seed-0.json"
+        doc = json.loads(meta.read_text())
+        doc["seed"] = 0 if doc["seed"] else 1  # anything but what was written
+        meta.write_text(json.dumps(doc))
+        for suffix in (".csv", ".json"):  # another task's files under this task's name
+            src = copy / "tasks" / KEYS[0] / f"seed-2{suffix}"
+            (copy / "tasks" / KEYS[0] / f"seed-3{suffix}").write_bytes(src.read_bytes())
+        with pytest.warns(RuntimeWarning) as caught:
+            again = run_ensemble(copy, workers=2, resume=True)
+        message = str(caught[0].message)
+        assert f"{KEYS[1]}/seed-0 (its metadata file seed-0.json does not match" in message
+        assert f"{KEYS[0]}/seed-3 (it belongs to another task" in message
+        assert sorted(map(tuple, again.run["ran"])) == [(KEYS[0], 3), (KEYS[1], 0)]
+        assert again.aggregate_path.read_bytes() == reference.aggregate_path.read_bytes()
+
+    def test_table_of_another_run_is_not_used(self, reference, tmp_path):
+        """Task files copied in from an ensemble with other sweep options."""
+        other = ensemble(params={"D": 2.2, "m": 4}, seeds=[1], levels=LEVELS, warm_start=False,
+                         out=tmp_path / "other", executor="serial", progress=False, figures=False)
+        copy = copy_of(reference, tmp_path)
+        for suffix in (".csv", ".json"):
+            name = f"seed-1{suffix}"
+            (copy / "tasks" / KEYS[0] / name).write_bytes(
+                (other.directory / "tasks" / KEYS[0] / name).read_bytes()
+            )
+        with pytest.raises(ValueError, match="another run"):
+            aggregate(copy, figures=False)
+
+    def test_garbage_table_named_by_aggregate_and_recomputed_by_cli(self, reference, tmp_path):
+        copy = copy_of(reference, tmp_path)
+        path = copy / "tasks" / KEYS[1] / "seed-3.csv"
+        path.write_bytes(b"\xff\xfe\x00\x81garbage\x9c\n" * 40)
+        with pytest.raises(ValueError) as info:
+            aggregate(copy, figures=False)
+        assert not isinstance(info.value, UnicodeDecodeError)
+        assert str(path) in str(info.value) and "resume" in str(info.value)
+
+        proc = run_cli(*CLI_ARGS, "--out", str(copy), "--workers", "2", "--no-figures",
+                       "--resume", "--json")
+        assert proc.returncode == 0, proc.stderr
+        warning = [ln for ln in proc.stderr.splitlines() if ln.startswith("leakpath: warning:")]
+        assert len(warning) == 1 and f"{KEYS[1]}/seed-3" in warning[0]
+        assert "UnicodeDecodeError" not in proc.stderr
+        assert json.loads(proc.stdout)["run"]["ran"] == [[KEYS[1], 3]]
+        assert (copy / "aggregate.csv").read_bytes() == reference.aggregate_path.read_bytes()
+
+    def test_garbage_manifest_is_named(self, reference, tmp_path):
+        copy = copy_of(reference, tmp_path)
+        manifest = copy / "manifest.json"
+        manifest.write_bytes(b"\x89PNG\r\n\x1a\n\xff\xff")
+        with pytest.raises(ValueError, match="manifest.json") as info:
+            aggregate(copy, figures=False)
+        assert not isinstance(info.value, UnicodeDecodeError)
+        proc = run_cli(*CLI_ARGS, "--out", str(copy), "--no-figures", "--resume")
+        assert proc.returncode == 2
+        lines = proc.stderr.strip().splitlines()
+        assert len(lines) == 1 and lines[0].startswith("leakpath: error: --out:")
+        assert str(manifest) in lines[0] and "--overwrite" in lines[0]
+
+    @pytest.mark.parametrize("key", ["../../..", "/etc", "..", "tasks/../.."])
+    def test_manifest_keys_outside_the_directory_are_refused(self, reference, tmp_path, key):
+        copy = copy_of(reference, tmp_path)
+        manifest = copy / "manifest.json"
+        doc = json.loads(manifest.read_text())
+        doc["param_sets"][0]["key"] = key
+        manifest.write_text(json.dumps(doc))
+        with pytest.raises(ValueError) as info:
+            aggregate(copy, figures=False)
+        assert repr(key) in str(info.value) and str(manifest) in str(info.value)
+        assert (copy / "aggregate.csv").read_bytes() == reference.aggregate_path.read_bytes()
+
+    def test_result_table_takes_only_its_own_tasks(self, reference):
+        with pytest.raises(KeyError):
+            reference.table("../" + KEYS[0], 0)
+        with pytest.raises(KeyError):
+            reference.table(KEYS[0], SURFACES)
+        rows = reference.table(KEYS[0], 0)
+        assert len(rows) == LEVELS + 1
+
+
+class TestDyingWorkers:
+    def test_a_seed_that_kills_its_worker_fails_alone(self, reference, tmp_path):
+        """Seed 2 ends its worker process (os._exit) in both parameter sets: every other task
+        is saved as the reference computed it, the failure names seed 2 and the reason, and a
+        resume (the generator healthy again) runs only the two seed-2 tasks."""
+        marker = tmp_path / "sick"
+        marker.touch()
+        out = tmp_path / "run"
+        gen = DiesOnSeed(2, marker)
+        kwargs = dict(generator=gen, params=PARAMS, surfaces=SURFACES, levels=LEVELS, out=out,
+                      workers=2, retries=1, progress=False, figures=False)
+        with pytest.raises(RuntimeError) as info:
+            ensemble(**kwargs)
+        message = str(info.value)
+        assert message.startswith(f"2 of {2 * SURFACES} task(s) failed")
+        for key in KEYS:
+            assert f"{key}/seed-2: its worker process exited with status 3" in message
+        saved = task_files(out)
+        expected = {f"tasks/{k}/seed-{s}.csv" for k in KEYS for s in range(SURFACES) if s != 2}
+        assert set(saved) == expected
+        for rel in expected:  # the same surfaces as the rmd generator's: the same tables
+            assert (out / rel).read_bytes() == (reference.directory / rel).read_bytes()
+
+        marker.unlink()
+        resumed = ensemble(**kwargs, resume=True)
+        assert sorted(map(tuple, resumed.run["ran"])) == [(k, 2) for k in KEYS]
+        assert resumed.run["tasks_resumed"] == 2 * SURFACES - 2
+        assert {p: task_files(out)[p] for p in saved} == saved  # untouched
+        assert resumed.aggregate_path.read_bytes() == reference.aggregate_path.read_bytes()
+        assert resumed.thresholds_path.read_bytes() == reference.thresholds_path.read_bytes()
+
+    def test_a_seed_killed_by_a_signal_is_reported(self, tmp_path):
+        marker = tmp_path / "sick"
+        marker.touch()
+        out = tmp_path / "run"
+        with pytest.raises(RuntimeError, match=r"D=2.3_m=3/seed-1: .*killed by SIGKILL"):
+            ensemble(generator=DiesOnSeed(1, marker, signal=True), params={"D": 2.3, "m": 3},
+                     surfaces=3, levels=2, out=out, workers=2, retries=0, progress=False,
+                     figures=False)
+        assert set(task_files(out)) == {f"tasks/D=2.3_m=3/seed-{s}.csv" for s in (0, 2)}

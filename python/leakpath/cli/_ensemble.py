@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import warnings
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -67,6 +68,29 @@ def _ensemble_summary_rows(result: Any) -> list[tuple[str, Any]]:
     return rows
 
 
+#: API argument names as the command line spells them, for messages.
+_FLAGS = {"out": "--out", "resume": "--resume", "overwrite": "--overwrite"}
+
+
+def _as_flags(message: str) -> str:
+    """A message in the API's words (``out: …``, ``resume=True``) in the CLI's (``--out``)."""
+    head, sep, rest = message.partition(":")
+    if sep and head in _FLAGS:
+        message = _FLAGS[head] + sep + rest
+    return (
+        message.replace("resume=True (CLI --resume)", "--resume")
+        .replace("overwrite=True (CLI --overwrite)", "--overwrite")
+        .replace("resume=True", "--resume")
+        .replace("overwrite=True", "--overwrite")
+    )
+
+
+def _print_warnings(caught: list[warnings.WarningMessage]) -> None:
+    """Warnings of the run (tasks recomputed after failing their checks), one line each."""
+    for w in caught:
+        print(f"{PROG}: warning: {_one_line(_as_flags(str(w.message)))}", file=sys.stderr)
+
+
 def _cmd_ensemble(args: argparse.Namespace) -> int:
     from ..ensemble import ensemble
 
@@ -75,29 +99,35 @@ def _cmd_ensemble(args: argparse.Namespace) -> int:
     if args.resume and args.overwrite:
         raise UsageError("--resume and --overwrite exclude each other")
     try:
-        result = ensemble(
-            generator="rmd",
-            params={"D": args.D, "m": args.m},
-            surfaces=args.surfaces,
-            levels=args.levels,
-            solver=args.solver,
-            warm_start=not args.cold,
-            axis=args.axis,
-            out=args.out,
-            executor=args.scheduler,
-            workers=args.workers,
-            resume=args.resume,
-            overwrite=args.overwrite,
-            progress=True,
-            figures=not args.no_figures,
-            E=args.E,
-            nu=args.nu,
-        )
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", RuntimeWarning)
+            result = ensemble(
+                generator="rmd",
+                params={"D": args.D, "m": args.m},
+                surfaces=args.surfaces,
+                levels=args.levels,
+                solver=args.solver,
+                warm_start=not args.cold,
+                axis=args.axis,
+                out=args.out,
+                executor=args.scheduler,
+                workers=args.workers,
+                resume=args.resume,
+                overwrite=args.overwrite,
+                progress=True,
+                figures=not args.no_figures,
+                E=args.E,
+                nu=args.nu,
+            )
     except (FileExistsError, ImportError) as exc:
-        raise UsageError(str(exc)) from None
+        raise UsageError(_as_flags(str(exc))) from None
+    except ValueError as exc:  # a bad argument or a damaged --out directory
+        raise UsageError(_as_flags(str(exc))) from None
     except RuntimeError as exc:  # failed tasks; the finished ones are on disk
-        print(f"{PROG}: error: {_one_line(str(exc))}", file=sys.stderr)
+        _print_warnings(caught)
+        print(f"{PROG}: error: {_one_line(_as_flags(str(exc)))}", file=sys.stderr)
         return 1
+    _print_warnings(caught)
     if args.json:
         _print_json(result.summary())
     else:

@@ -23,7 +23,8 @@ from ._layout import (
     _csv,
     _param_sets_from_manifest,
     _read_manifest,
-    _read_table,
+    _read_task,
+    _run_id,
     _task_csv,
 )
 from ._leakage import write_leak_statistics
@@ -181,8 +182,14 @@ class EnsembleResult:
         )
 
     def table(self, key: str, seed: int) -> list[dict[str, Any]]:
-        """The per-surface sweep table of task ``(key, seed)``, read from its CSV."""
-        return _read_table(_task_csv(self.directory, key, seed))
+        """The per-surface sweep table of task ``(key, seed)``, read from its CSV (checked
+        against the checksum in its JSON)."""
+        for ps in self.param_sets:
+            if ps.key == key:
+                if seed not in ps.seeds:
+                    raise KeyError(f"seed: {seed!r} is not a seed of {key!r}")
+                return _read_task(self.directory, _run_id(self.identity), ps, seed)
+        raise KeyError(f"key: {key!r} is not a parameter set of this ensemble")
 
     @property
     def aggregate_path(self) -> Path:
@@ -269,8 +276,9 @@ def aggregate(
     directory = Path(out)
     manifest = _read_manifest(directory)
     identity = dict(manifest["identity"])
-    axis = identity["axis"]
-    param_sets = _param_sets_from_manifest(manifest)
+    axis = identity.get("axis")  # an edited identity fails every task's run check below
+    run_id = _run_id(identity)
+    param_sets = _param_sets_from_manifest(manifest, directory / "manifest.json")
     missing = [
         f"{ps.key}/seed-{s}"
         for ps in param_sets
@@ -290,7 +298,7 @@ def aggregate(
     leak_sets = []  # leak-rate statistics (_leakage)
     for ps in param_sets:
         seeds = sorted(ps.seeds)
-        tables = [_read_table(_task_csv(directory, ps.key, s)) for s in seeds]
+        tables = [_read_task(directory, run_id, ps, s) for s in seeds]
         leak_sets.append((ps, seeds, tables))  # leak-rate statistics (_leakage)
         agg_rows += _aggregate_set(ps, tables, param_names)
         set_thr = []

@@ -11,6 +11,7 @@ import sys
 import time
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
+from multiprocessing.connection import wait as _wait_ready
 from pathlib import Path
 from typing import Any
 
@@ -239,12 +240,14 @@ class _Driver:
     def __init__(
         self,
         out: Path,
+        run_id: str,
         total: int,
         done_before: int,
         progress: bool,
         stop_after: int | None = None,
     ):
         self.out = out
+        self.run_id = run_id
         self.written: list[tuple[str, int]] = []
         self.failed: list[tuple[str, int, str]] = []
         self.compute_seconds = 0.0
@@ -264,7 +267,7 @@ class _Driver:
             )
 
     def done(self, result: _TaskOutput) -> None:
-        _write_task(self.out, result)
+        _write_task(self.out, result, self.run_id)
         self.written.append((result.key, result.seed))
         self.compute_seconds += result.seconds
         if self.bar is not None:
@@ -274,7 +277,10 @@ class _Driver:
             os.kill(os.getpid(), getattr(signal, "SIGKILL", signal.SIGTERM))
 
     def error(self, spec: _TaskSpec, exc: BaseException) -> None:
-        self.failed.append((spec.key, spec.seed, f"{type(exc).__name__}: {exc}"))
+        self.fail(spec, f"{type(exc).__name__}: {exc}")
+
+    def fail(self, spec: _TaskSpec, reason: str) -> None:
+        self.failed.append((spec.key, spec.seed, reason))
         if self.bar is not None:
             self.bar.update(1)
 
@@ -320,63 +326,137 @@ def _run_pools(
     retries: int,
     alive: Any,
 ) -> dict[str, Any]:
+    """Run the tasks on one process pool; if a worker process dies, the pool breaks and
+    takes every unfinished task with it — those then run one process each
+    (:func:`_run_isolated`), so that a task that kills its worker fails alone."""
     restarts = 0
-    stalls = 0
     generator = next(iter(pending.values())).generator
     keep_main = getattr(generator, "__module__", None) == "__main__"
-    while pending:
-        # Worker processes start while the pool is built and tasks are submitted.
+    # Worker processes start while the pool is built and tasks are submitted.
+    with _StartingChildren(keep_main):
+        pool = ProcessPoolExecutor(
+            max_workers=min(workers, len(pending)),
+            mp_context=ctx,
+            initializer=_init_worker,
+            initargs=(threads, alive),
+        )
+    clean = False
+    try:
         with _StartingChildren(keep_main):
-            pool = ProcessPoolExecutor(
-                max_workers=min(workers, len(pending)),
-                mp_context=ctx,
-                initializer=_init_worker,
-                initargs=(threads, alive),
-            )
-        broken = False
-        finished_here = 0
-        clean = False
-        try:
-            with _StartingChildren(keep_main):
-                futures = {pool.submit(_run_task, spec): tid for tid, spec in pending.items()}
-            not_done = set(futures)
-            while not_done:
-                done, not_done = wait(not_done, return_when=FIRST_COMPLETED)
-                for fut in sorted(done, key=lambda f: futures[f]):
-                    tid = futures[fut]
-                    try:
-                        result = fut.result()
-                    except BrokenProcessPool:
-                        broken = True
-                        continue
-                    except Exception as exc:  # noqa: BLE001 - the task's own error
-                        driver.error(pending.pop(tid), exc)
-                        finished_here += 1
-                        continue
-                    driver.done(result)
-                    pending.pop(tid)
-                    finished_here += 1
-            clean = True
-        finally:
-            # After Ctrl-C or an error in the driver do not wait for running tasks.
-            pool.shutdown(wait=clean, cancel_futures=True)
-        if broken and pending:
-            restarts += 1
-            stalls = 0 if finished_here else stalls + 1
-            if stalls > retries:
-                names = ", ".join(f"{k}/seed-{s}" for k, s in list(pending)[:5])
-                raise RuntimeError(
-                    f"worker processes died {stalls} times in a row without finishing a task "
-                    f"(unfinished: {names}{' …' if len(pending) > 5 else ''}); the finished "
-                    "tasks are saved, rerun with resume=True"
-                )
+            futures = {pool.submit(_run_task, spec): tid for tid, spec in pending.items()}
+        not_done = set(futures)
+        while not_done:
+            done, not_done = wait(not_done, return_when=FIRST_COMPLETED)
+            for fut in sorted(done, key=lambda f: futures[f]):
+                tid = futures[fut]
+                try:
+                    result = fut.result()
+                except BrokenProcessPool:
+                    continue  # stays pending
+                except Exception as exc:  # noqa: BLE001 - the task's own error
+                    driver.error(pending.pop(tid), exc)
+                    continue
+                driver.done(result)
+                pending.pop(tid)
+        clean = True
+    finally:
+        # After Ctrl-C or an error in the driver do not wait for running tasks.
+        pool.shutdown(wait=clean, cancel_futures=True)
+    isolated = len(pending)
+    if pending:
+        restarts = 1
+        _run_isolated(ctx, pending, driver, workers, threads, retries, alive, keep_main)
     return {
         "executor": "processes",
         "start_method": ctx.get_start_method(),
         "workers": workers,
         "threads_per_worker": threads,
         "pool_restarts": restarts,
+        "isolated_tasks": isolated,
     }
+
+
+def _isolated_task(spec: _TaskSpec, conn: Any, threads: int, alive: Any) -> None:
+    """Body of a one-task process: run the task, send ``("ok", output)`` or
+    ``("error", reason)`` through ``conn``."""
+    _init_worker(threads, alive)
+    try:
+        message: tuple[str, Any] = ("ok", _run_task(spec))
+    except BaseException as exc:  # noqa: BLE001 - reported as the task's failure
+        message = ("error", f"{type(exc).__name__}: {exc}")
+    conn.send(message)
+    conn.close()
+
+
+def _death_reason(exitcode: int | None) -> str:
+    """Why a worker process ended without a result, from its exit code."""
+    if exitcode is not None and exitcode < 0:
+        try:
+            name = signal.Signals(-exitcode).name
+        except ValueError:
+            name = f"signal {-exitcode}"
+        return f"its worker process was killed by {name}"
+    return f"its worker process exited with status {exitcode} without a result"
+
+
+def _run_isolated(
+    ctx: Any,
+    pending: dict[tuple[str, int], _TaskSpec],
+    driver: _Driver,
+    workers: int,
+    threads: int,
+    retries: int,
+    alive: Any,
+    keep_main: bool,
+) -> None:
+    """Run each pending task in a process of its own, ``workers`` at a time.
+
+    A task whose process dies is run again up to ``retries`` times, then reported failed
+    with the reason (signal or exit status); every other task is written as it finishes.
+    """
+    queue = list(pending)
+    deaths = dict.fromkeys(pending, 0)
+    running: dict[Any, tuple[tuple[str, int], Any]] = {}  # result pipe → (task, process)
+    try:
+        while queue or running:
+            while queue and len(running) < workers:
+                tid = queue.pop(0)
+                read, write = ctx.Pipe(duplex=False)
+                proc = ctx.Process(
+                    target=_isolated_task,
+                    args=(pending[tid], write, threads, alive),
+                    name=f"leakpath-task-{tid[0]}-seed-{tid[1]}",
+                    daemon=True,
+                )
+                with _StartingChildren(keep_main):
+                    proc.start()
+                write.close()  # the child's copy is the only one: EOF when it dies
+                running[read] = (tid, proc)
+            for conn in _wait_ready(list(running)):
+                tid, proc = running.pop(conn)
+                try:
+                    status, payload = conn.recv()
+                except (EOFError, OSError):
+                    status, payload = "died", None
+                finally:
+                    conn.close()
+                proc.join()
+                if status == "ok":
+                    pending.pop(tid)
+                    driver.done(payload)
+                elif status == "error":
+                    driver.fail(pending.pop(tid), str(payload))
+                else:
+                    deaths[tid] += 1
+                    if deaths[tid] > retries:
+                        driver.fail(pending.pop(tid), _death_reason(proc.exitcode))
+                    else:
+                        queue.append(tid)
+    finally:
+        for conn, (_, proc) in running.items():  # only after an error in the driver
+            proc.kill()
+            proc.join()
+            conn.close()
 
 
 def _run_dask(

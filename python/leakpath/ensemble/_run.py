@@ -7,6 +7,7 @@ import numbers
 import os
 import shutil
 import time
+import warnings
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -35,7 +36,8 @@ from ._layout import (
     _clean_stale_temporaries,
     _identity,
     _read_manifest,
-    _task_done,
+    _run_id,
+    _task_problem,
     _TaskSpec,
 )
 from ._params import (
@@ -164,10 +166,13 @@ def ensemble(
         single-threaded task per core, reproducible across executors; for Dask the default
         also respects a ``RAYON_NUM_THREADS`` already set in the workers' environment.
     retries : int
-        Dask: ``retries`` of a failed task; processes: consecutive broken pools tolerated
-        without any task finishing.
+        Dask: ``retries`` of a failed task; processes: how often a task whose worker process
+        died is run again (after a worker dies, the unfinished tasks run one process each,
+        so that a task that kills its worker fails alone and the others are saved).
     resume : bool
-        Skip tasks whose table exists in ``DIR``; run only the missing ones.
+        Skip tasks whose files in ``DIR`` pass their checks (checksums, same run); run the
+        missing ones, and again those whose files fail (named in a ``RuntimeWarning`` and in
+        ``run["recomputed"]``).
     overwrite : bool
         Delete a previous ensemble's files in ``DIR`` first (only this module's files).
     progress : bool
@@ -305,13 +310,19 @@ def ensemble(
         atomic_write_text(directory / "manifest.json", _dumps(manifest))
 
         kill_once = _kill_once
+        run_id = _run_id(identity)
         all_tasks = [(ps, seed) for ps in param_sets for seed in ps.seeds]
         todo: list[_TaskSpec] = []
         resumed: list[tuple[str, int]] = []
+        recomputed: list[tuple[str, int, str]] = []
         for ps, seed in all_tasks:
-            if resume and _task_done(directory, ps.key, seed):
-                resumed.append((ps.key, seed))
-                continue
+            if resume:
+                problem = _task_problem(directory, run_id, ps, seed)
+                if problem is None:
+                    resumed.append((ps.key, seed))
+                    continue
+                if problem != "not finished":  # files there but not usable: run it again
+                    recomputed.append((ps.key, seed, problem))
             todo.append(
                 _TaskSpec(
                     generator=generator,
@@ -330,7 +341,15 @@ def ensemble(
                 )
             )
 
-        driver = _Driver(directory, len(all_tasks), len(resumed), progress, _stop_after)
+        if recomputed:
+            warnings.warn(
+                "out: recomputing "
+                + "; ".join(f"{k}/seed-{s} ({why})" for k, s, why in recomputed)
+                + " — their files failed the integrity check and are not used",
+                RuntimeWarning,
+                stacklevel=2,
+            )
+        driver = _Driver(directory, run_id, len(all_tasks), len(resumed), progress, _stop_after)
         t_run = time.perf_counter()
         try:
             if not todo:
@@ -359,6 +378,7 @@ def ensemble(
             "tasks_total": len(all_tasks),
             "tasks_run": len(driver.written),
             "tasks_resumed": len(resumed),
+            "recomputed": [[k, s, why] for k, s, why in recomputed],
             "ran": [[k, s] for k, s in driver.written],
             "run_seconds": run_seconds,
             "compute_seconds": driver.compute_seconds,
