@@ -384,3 +384,67 @@ def test_cli_sigkill_resume_overwrite(tmp_path):
     meta = json.loads((clean / "metadata.json").read_text(encoding="utf-8"))
     assert meta["command"] == "sweep" and meta["surface"]["seed"] == 3
     assert "Delta*" in full.stdout and len(full.stdout.strip().splitlines()) >= 43
+
+
+class _SweepStarted(Exception):
+    """Raised by a stand-in for leakpath.sweep: the command got as far as solving."""
+
+
+@pytest.fixture
+def no_solving(monkeypatch):
+    """Replace the sweep the command line calls; the list records each call."""
+    from leakpath import _sweep
+
+    calls: list[dict] = []
+
+    def fake(surface, **kwargs):
+        calls.append(kwargs)
+        raise _SweepStarted
+
+    monkeypatch.setattr(_sweep, "sweep", fake)
+    return calls
+
+
+@pytest.mark.parametrize(
+    "args, flag",
+    [
+        # --levels 4 gives rows 0 … 4: row 5 and row 99 do not exist.
+        (["sweep", "rmd:m=4,D=2.1,seed=1", "--levels", "4", "--flux-maps", "99"], "--flux-maps"),
+        (["sweep", "rmd:m=4,D=2.1,seed=1", "--levels", "4", "--flux-maps", "2,5"], "--flux-maps"),
+        # Two imposed pressures give rows 0 and 1.
+        (["sweep", "rmd:m=4,D=2.1,seed=1", "--mean-pressures", "0.01,0.02", "--flux-maps", "2"],
+         "--flux-maps"),
+        (["sweep", "rmd:m=4,D=2.1,seed=1", "--no-flow", "--flux-maps", "1"], "--flux-maps"),
+        (["sweep", "rmd:m=4,D=2.1,seed=1", "--mean-pressures", "0.2,0.1"], "--mean-pressures"),
+        # The paper's sweep has 20 levels: rows 0 … 20.
+        (["paper", "--flux-maps", "21"], "--flux-maps"),
+        (["sweep", "rmd:m=3,D=2.2,m=4,seed=0"], "m twice"),
+    ],
+)
+def test_every_option_is_checked_before_solving(tmp_path, capsys, no_solving, args, flag):
+    from leakpath import cli
+
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "table.csv").write_text("an earlier table\n")
+    assert cli.main([*args, "--out", str(out), "--overwrite"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("leakpath: error: ") and flag in err, err
+    assert no_solving == []
+    # Nothing in the output directory was touched.
+    assert (out / "table.csv").read_text() == "an earlier table\n"
+
+
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["sweep", "rmd:m=4,D=2.1,seed=1", "--levels", "4", "--flux-maps", "0,4"],
+        ["sweep", "rmd:m=4,D=2.1,seed=1", "--mean-pressures", "0.01,0.02", "--flux-maps", "1"],
+        ["paper", "--flux-maps", "20"],
+    ],
+)
+def test_rows_that_exist_pass_the_early_checks(tmp_path, capsys, no_solving, args):
+    from leakpath import cli
+
+    assert cli.main([*args, "--out", str(tmp_path / "out")]) == 1  # the stand-in's exception
+    assert len(no_solving) == 1
