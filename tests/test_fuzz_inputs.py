@@ -368,6 +368,59 @@ class TestMemoryGuards:
         for name in ("s.npz", "s.npy", "s.txt"):  # npz: its uncompressed size counts
             refused(lambda n=name: load(tmp_path / n, dx=small.dx), "path", MemoryError)
 
+    def test_compressed_npz_is_sized_by_what_it_expands_to(self, tmp_path, monkeypatch):
+        # A million int8 zeros compress to about a kilobyte (several hundred times smaller).
+        # Loaded, they are 1 MB as stored plus 8 MB as float64 heights at the very least.
+        path = tmp_path / "zeros.npz"
+        points = 1000 * 1000
+        np.savez_compressed(path, heights=np.zeros((1000, 1000), np.int8), dx=np.float64(1.0))
+        assert path.stat().st_size * 200 < points
+        monkeypatch.setattr(leakpath._validate, "memory_budget", lambda: 4 * points)
+        err = refused(lambda: load(path), "path", MemoryError)
+        assert isinstance(err, ProblemTooLargeError)
+        assert err.estimate >= 9 * points > err.limit and "zeros.npz" in str(err)
+        # With room for those copies the same file loads.
+        monkeypatch.setattr(leakpath._validate, "memory_budget", lambda: 100 * points)
+        assert load(path).shape == (1000, 1000)
+
+    def test_npz_member_header_declaring_more_than_the_archive_holds(self, tmp_path, monkeypatch):
+        # The zip directory says a few hundred bytes; the .npy header inside declares a
+        # 2000 x 2000 float64 array (32 MB) that reading it would allocate first.
+        import io
+        import zipfile
+
+        header = io.BytesIO()
+        np.lib.format.write_array_header_1_0(
+            header, {"descr": "<f8", "fortran_order": False, "shape": (2000, 2000)}
+        )
+        path = tmp_path / "liar.npz"
+        with zipfile.ZipFile(path, "w") as archive:
+            archive.writestr("heights.npy", header.getvalue() + bytes(64))
+        monkeypatch.setattr(leakpath._validate, "memory_budget", lambda: 10 * 2**20)
+        err = refused(lambda: load(path, dx=1.0), "path", MemoryError)
+        assert err.estimate >= 8 * 2000 * 2000
+
+    def test_npy_header_sizes_the_read(self, tmp_path, monkeypatch):
+        path = tmp_path / "bytes.npy"
+        np.save(path, np.zeros((1000, 1000), np.uint8))  # 1 MB on disk, 8 MB as float64
+        monkeypatch.setattr(leakpath._validate, "memory_budget", lambda: 4 * 10**6)
+        refused(lambda: load(path, dx=1.0), "path", MemoryError)
+
+    @pytest.mark.parametrize("where", ["_read_npz", "real_array"])
+    def test_memory_error_while_reading_is_a_problem_too_large(
+        self, tmp_path, monkeypatch, small, where
+    ):
+        # The estimate fits, the allocation fails anyway (other processes took the memory).
+        small.save(tmp_path / "s.npz")
+
+        def out_of_memory(*args, **kwargs):
+            raise MemoryError
+
+        target = leakpath._readers if where == "_read_npz" else leakpath._validate
+        monkeypatch.setattr(target, where, out_of_memory)
+        err = refused(lambda: load(tmp_path / "s.npz"), "path", MemoryError)
+        assert isinstance(err, ProblemTooLargeError) and "s.npz" in str(err)
+
     def test_huge_arrays_that_cost_nothing_until_copied(self):
         # Zero-stride views: 80 GB of heights that occupy 8 bytes until someone copies them.
         huge = np.broadcast_to(1.0, (100_000, 100_000))
