@@ -583,6 +583,97 @@ def test_the_probes_of_the_report(small, files):
     refused(lambda: Surface(small.heights + 0j, 1.0), "heights")
 
 
+# ---------------------------------------------------------------------------- unusable paths
+@pytest.fixture
+def bad_paths(tmp_path) -> dict[str, str]:
+    """Paths no file can be read from or written to, each for its own reason."""
+    loop = tmp_path / "loop"
+    loop.symlink_to(loop)  # a link to itself: every lookup through it fails with ELOOP
+    a_file = tmp_path / "plain.txt"
+    a_file.write_text("x")
+    return {
+        "5000 characters": str(tmp_path / ("a" * 5000)),
+        "a 300-character name": str(tmp_path / ("b" * 300 + ".npz")),
+        "NUL": str(tmp_path / "x\x00y.npz"),
+        "symlink loop": str(loop),
+        "inside a symlink loop": str(loop / "x.npz"),
+        "below a file": str(a_file / "x.npz"),
+    }
+
+
+PATH_WORDS = {
+    "5000 characters": "too long",
+    "a 300-character name": "too long",
+    "NUL": "NUL",
+    "symlink loop": "loop of symbolic links",
+    "inside a symlink loop": "loop of symbolic links",
+    "below a file": "through a file",
+}
+
+
+@pytest.mark.parametrize("kind", list(PATH_WORDS))
+def test_unusable_paths_are_refused_by_name_in_the_api(small, bad_paths, kind):
+    from leakpath.plotting.flow import save_flow_figures
+
+    bad = bad_paths[kind]
+    result = sweep(small, levels=2)
+    calls = {
+        "path": [
+            lambda: load(bad, dx=1.0),
+            lambda: small.save(bad),  # the path is refused before its suffix is looked at
+            lambda: result.to_csv(bad),
+            lambda: result.to_json(bad),
+        ],
+        "outdir": [lambda: result.plot(bad), lambda: save_flow_figures(result, bad)],
+        "checkpoint_dir": [lambda: sweep(small, levels=2, checkpoint_dir=bad)],
+    }
+    for argument, group in calls.items():
+        for call in group:
+            err = refused(call, argument)
+            assert PATH_WORDS[kind] in str(err)
+            assert len(str(err)) < 400  # a long path is shortened in the message
+
+
+def test_a_file_name_near_the_limit_is_still_written_atomically(tmp_path, small):
+    # The hidden temporary beside the target must not exceed the name limit itself.
+    path = tmp_path / ("c" * 250 + ".npz")
+    small.save(path)
+    assert np.array_equal(load(path).heights, small.heights)
+    assert [p.name for p in tmp_path.iterdir()] == [path.name]
+
+
+@pytest.mark.parametrize("kind", list(PATH_WORDS))
+def test_unusable_paths_are_refused_by_flag_in_the_cli(tmp_path, capsys, bad_paths, kind):
+    from leakpath import cli
+
+    bad = bad_paths[kind]
+    spec = "rmd:m=3,D=2.2,seed=0"
+    for argv, flag in [
+        (["sweep", bad, "--dx", "1", "--out", str(tmp_path / "o")], "SURFACE:"),
+        (["sweep", spec, "--out", bad], "--out:"),
+        (["surface", "rmd", "--m", "3", "--D", "2.2", "--seed", "0", "--out", bad], "--out:"),
+        (["ensemble", "--D", "2.2", "--m", "3", "--surfaces", "1", "--out", bad], "--out:"),
+    ]:
+        assert cli.main(argv) == 2, argv
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and err.startswith(f"leakpath: error: {flag}"), err
+        assert PATH_WORDS[kind] in err and len(err) < 400 and "Traceback" not in err
+
+
+def test_a_5000_character_path_in_a_subprocess(tmp_path):
+    proc = run_cli("sweep", str(tmp_path / ("a" * 5000)), "--dx", "1")
+    line = cli_refused(proc, "SURFACE")
+    assert "too long" in line and len(line) < 400
+
+
+def test_other_os_errors_are_one_short_line():
+    from leakpath.cli import _os_error_text
+
+    text = _os_error_text(PermissionError(13, "Permission denied", "/d/" + "a" * 5000))
+    assert text.startswith("Permission denied: '/d/aaa") and "5003 characters" in text
+    assert len(text) < 200
+
+
 # ---------------------------------------------------------------------------- the CLI
 class TestCLI:
     @pytest.mark.parametrize(

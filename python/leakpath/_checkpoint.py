@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from . import leakage
+from . import _validate, leakage
 from ._io import atomic_write_bytes, atomic_write_text, dumps, pack, pack_mask, unpack, unpack_mask
 from ._table import _LEVEL_COLUMNS, _TYPES, _coerce_cell
 from .errors import InvalidArgumentError
@@ -77,7 +77,7 @@ class _Checkpoint:
     """
 
     def __init__(self, directory: PathLike, manifest: dict[str, Any], keep_fields: bool):
-        self.dir = Path(directory)
+        self.dir = _validate.path("checkpoint_dir", directory)
         self.keep_fields = keep_fields
         self.recomputed: list[tuple[int, str]] = []
         if self.dir.exists() and not self.dir.is_dir():
@@ -85,7 +85,7 @@ class _Checkpoint:
                 f"checkpoint_dir: {str(self.dir)!r} exists and is not a directory",
                 argument="checkpoint_dir",
             )
-        self.dir.mkdir(parents=True, exist_ok=True)
+        _validate.make_directory("checkpoint_dir", self.dir)
         for stale in self.dir.glob(".*.tmp"):  # left by a run killed while writing
             try:
                 stale.unlink()

@@ -78,15 +78,15 @@ def _resolve_dx(path: Path, dx_file: float | None, dx_arg: float | None) -> floa
 
 def _check_path(path: Any) -> tuple[Path, os.stat_result]:
     """A path to an existing regular file (never a FIFO or device, which could block)."""
-    if isinstance(path, (bytes, bool)) or not isinstance(path, (str, os.PathLike)):
-        raise InvalidArgumentError(
-            f"path: must be a file path (str or os.PathLike), got {_validate.describe(path)}"
-        )
-    p = Path(path)
+    p = _validate.path("path", path)  # NUL, too long, symlink loops: refused by name
     try:
         info = os.stat(p)
     except FileNotFoundError:
         raise FileNotFoundError(f"surface file {str(p)!r} not found") from None
+    except OSError as exc:  # changed since the check above
+        raise InvalidArgumentError(
+            f"path: cannot read {_validate.show_path(p)} ({exc.strerror})", argument="path"
+        ) from None
     if stat.S_ISDIR(info.st_mode):
         raise InvalidArgumentError(f"path: {str(p)!r} is a directory, not a surface file")
     if not stat.S_ISREG(info.st_mode):

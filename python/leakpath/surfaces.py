@@ -237,12 +237,8 @@ class Surface:
         FileNotFoundError
             The target directory does not exist.
         """
-        if isinstance(path, (bytes, bool)) or not isinstance(path, (str, os.PathLike)):
-            raise InvalidArgumentError(
-                f"path: must be a file path (str or os.PathLike), got {_validate.describe(path)}"
-            )
+        target = _validate.path("path", path)
         overwrite = _validate.flag("overwrite", overwrite)
-        target = Path(path)
         if target.suffix.lower() != ".npz":
             raise ValueError(f"path must end in '.npz' to save a surface, got {str(target)!r}")
         try:

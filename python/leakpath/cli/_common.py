@@ -127,6 +127,7 @@ def _print_json(payload: Any, default: Callable[[Any], Any] = str) -> None:
 
 
 def _check_out(path: Path, overwrite: bool) -> None:
+    _validate.path("--out", path)
     if path.suffix.lower() != ".npz":
         raise UsageError(f"--out must end in '.npz', got {str(path)!r}")
     if path.exists() and not overwrite:
@@ -195,7 +196,7 @@ def _surface_from_arg(text: str, dx: float | None, fill: str | None = None) -> S
         if fill is not None:
             raise UsageError("--fill applies to surface files only, not to a generator spec")
         return generate(gen, params, seed)
-    path = Path(text)
+    path = _validate.path("SURFACE", text)
     if not path.exists():
         raise UsageError(
             f"SURFACE {text!r} is neither an existing file nor a spec such as "
@@ -219,6 +220,7 @@ def _prepare_outdir(out: Path, *, overwrite: bool, resume: bool) -> None:
     """
     if overwrite and resume:
         raise UsageError("--overwrite and --resume exclude each other")
+    _validate.path("--out", out)
     if out.exists() and not out.is_dir():
         raise UsageError(f"--out {str(out)!r} exists and is not a directory")
     non_empty = out.is_dir() and any(out.iterdir())
@@ -241,7 +243,7 @@ def _prepare_outdir(out: Path, *, overwrite: bool, resume: bool) -> None:
         for name in (TABLE_NAME, METADATA_NAME, SURFACE_NAME, FIELDS_NAME):
             if (out / name).is_file():
                 (out / name).unlink()
-    out.mkdir(parents=True, exist_ok=True)
+    _validate.make_directory("--out", out)
 
 
 def format_summary(rows: Sequence[dict[str, Any]]) -> str:
