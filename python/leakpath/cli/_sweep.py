@@ -73,7 +73,7 @@ def _run_sweep(
             "SURFACE is flat (h_s = max h - min h = 0): the flat touches every point at once "
             "and there is no approach to sweep; check the file's heights"
         )
-    _prepare_outdir(out, overwrite=args.overwrite, resume=args.resume)
+    record = _prepare_outdir(out, overwrite=args.overwrite, resume=args.resume)
     try:
         result = sweep(
             surface,
@@ -101,14 +101,19 @@ def _run_sweep(
         "metadata": out / METADATA_NAME,
         "surface": out / SURFACE_NAME,
     }
-    surface.save(files["surface"], overwrite=True)
-    result.to_csv(files["table"])
+    # Each file is recorded as soon as it is written, so that a later --overwrite removes
+    # exactly this run's files even if the run stops part-way.
+    record.add([surface.save(files["surface"], overwrite=True)])
+    record.add([result.to_csv(files["table"])])
     if keep_fields:
         files["fields"] = result.save_fields(out / FIELDS_NAME)
+        record.add([files["fields"]])
     figures = result.plot(out / FIGURES_DIR)
+    record.add(figures)
     from ..plotting.flow import save_flow_figures  # leak-rate figures (fig4, flux maps)
 
     figures += save_flow_figures(result, out / FIGURES_DIR, flux_levels=args.flux_maps)
+    record.add(figures)
     extra = {
         "command": command,
         "argv": list(argv) if argv is not None else sys.argv[1:],
@@ -119,7 +124,7 @@ def _run_sweep(
             "checkpoints": str(out / CHECKPOINT_DIR),
         },
     }
-    result.to_json(files["metadata"], extra=extra)
+    record.add([result.to_json(files["metadata"], extra=extra)])
     summary = [{key: row[key] for key, _ in _SUMMARY_COLUMNS} for row in result.rows]
     if args.json:
         payload = {
