@@ -368,6 +368,59 @@ class TestMemoryGuards:
         for name in ("s.npz", "s.npy", "s.txt"):  # npz: its uncompressed size counts
             refused(lambda n=name: load(tmp_path / n, dx=small.dx), "path", MemoryError)
 
+    def test_compressed_npz_is_sized_by_what_it_expands_to(self, tmp_path, monkeypatch):
+        # A million int8 zeros compress to about a kilobyte (several hundred times smaller).
+        # Loaded, they are 1 MB as stored plus 8 MB as float64 heights at the very least.
+        path = tmp_path / "zeros.npz"
+        points = 1000 * 1000
+        np.savez_compressed(path, heights=np.zeros((1000, 1000), np.int8), dx=np.float64(1.0))
+        assert path.stat().st_size * 200 < points
+        monkeypatch.setattr(leakpath._validate, "memory_budget", lambda: 4 * points)
+        err = refused(lambda: load(path), "path", MemoryError)
+        assert isinstance(err, ProblemTooLargeError)
+        assert err.estimate >= 9 * points > err.limit and "zeros.npz" in str(err)
+        # With room for those copies the same file loads.
+        monkeypatch.setattr(leakpath._validate, "memory_budget", lambda: 100 * points)
+        assert load(path).shape == (1000, 1000)
+
+    def test_npz_member_header_declaring_more_than_the_archive_holds(self, tmp_path, monkeypatch):
+        # The zip directory says a few hundred bytes; the .npy header inside declares a
+        # 2000 x 2000 float64 array (32 MB) that reading it would allocate first.
+        import io
+        import zipfile
+
+        header = io.BytesIO()
+        np.lib.format.write_array_header_1_0(
+            header, {"descr": "<f8", "fortran_order": False, "shape": (2000, 2000)}
+        )
+        path = tmp_path / "liar.npz"
+        with zipfile.ZipFile(path, "w") as archive:
+            archive.writestr("heights.npy", header.getvalue() + bytes(64))
+        monkeypatch.setattr(leakpath._validate, "memory_budget", lambda: 10 * 2**20)
+        err = refused(lambda: load(path, dx=1.0), "path", MemoryError)
+        assert err.estimate >= 8 * 2000 * 2000
+
+    def test_npy_header_sizes_the_read(self, tmp_path, monkeypatch):
+        path = tmp_path / "bytes.npy"
+        np.save(path, np.zeros((1000, 1000), np.uint8))  # 1 MB on disk, 8 MB as float64
+        monkeypatch.setattr(leakpath._validate, "memory_budget", lambda: 4 * 10**6)
+        refused(lambda: load(path, dx=1.0), "path", MemoryError)
+
+    @pytest.mark.parametrize("where", ["_read_npz", "real_array"])
+    def test_memory_error_while_reading_is_a_problem_too_large(
+        self, tmp_path, monkeypatch, small, where
+    ):
+        # The estimate fits, the allocation fails anyway (other processes took the memory).
+        small.save(tmp_path / "s.npz")
+
+        def out_of_memory(*args, **kwargs):
+            raise MemoryError
+
+        target = leakpath._readers if where == "_read_npz" else leakpath._validate
+        monkeypatch.setattr(target, where, out_of_memory)
+        err = refused(lambda: load(tmp_path / "s.npz"), "path", MemoryError)
+        assert isinstance(err, ProblemTooLargeError) and "s.npz" in str(err)
+
     def test_huge_arrays_that_cost_nothing_until_copied(self):
         # Zero-stride views: 80 GB of heights that occupy 8 bytes until someone copies them.
         huge = np.broadcast_to(1.0, (100_000, 100_000))
@@ -528,6 +581,97 @@ def test_the_probes_of_the_report(small, files):
     refused(lambda: solve(small, 0.1, E=1e-320), "E")
     refused(lambda: load(files["complex"], dx=1.0), "path")
     refused(lambda: Surface(small.heights + 0j, 1.0), "heights")
+
+
+# ---------------------------------------------------------------------------- unusable paths
+@pytest.fixture
+def bad_paths(tmp_path) -> dict[str, str]:
+    """Paths no file can be read from or written to, each for its own reason."""
+    loop = tmp_path / "loop"
+    loop.symlink_to(loop)  # a link to itself: every lookup through it fails with ELOOP
+    a_file = tmp_path / "plain.txt"
+    a_file.write_text("x")
+    return {
+        "5000 characters": str(tmp_path / ("a" * 5000)),
+        "a 300-character name": str(tmp_path / ("b" * 300 + ".npz")),
+        "NUL": str(tmp_path / "x\x00y.npz"),
+        "symlink loop": str(loop),
+        "inside a symlink loop": str(loop / "x.npz"),
+        "below a file": str(a_file / "x.npz"),
+    }
+
+
+PATH_WORDS = {
+    "5000 characters": "too long",
+    "a 300-character name": "too long",
+    "NUL": "NUL",
+    "symlink loop": "loop of symbolic links",
+    "inside a symlink loop": "loop of symbolic links",
+    "below a file": "through a file",
+}
+
+
+@pytest.mark.parametrize("kind", list(PATH_WORDS))
+def test_unusable_paths_are_refused_by_name_in_the_api(small, bad_paths, kind):
+    from leakpath.plotting.flow import save_flow_figures
+
+    bad = bad_paths[kind]
+    result = sweep(small, levels=2)
+    calls = {
+        "path": [
+            lambda: load(bad, dx=1.0),
+            lambda: small.save(bad),  # the path is refused before its suffix is looked at
+            lambda: result.to_csv(bad),
+            lambda: result.to_json(bad),
+        ],
+        "outdir": [lambda: result.plot(bad), lambda: save_flow_figures(result, bad)],
+        "checkpoint_dir": [lambda: sweep(small, levels=2, checkpoint_dir=bad)],
+    }
+    for argument, group in calls.items():
+        for call in group:
+            err = refused(call, argument)
+            assert PATH_WORDS[kind] in str(err)
+            assert len(str(err)) < 400  # a long path is shortened in the message
+
+
+def test_a_file_name_near_the_limit_is_still_written_atomically(tmp_path, small):
+    # The hidden temporary beside the target must not exceed the name limit itself.
+    path = tmp_path / ("c" * 250 + ".npz")
+    small.save(path)
+    assert np.array_equal(load(path).heights, small.heights)
+    assert [p.name for p in tmp_path.iterdir()] == [path.name]
+
+
+@pytest.mark.parametrize("kind", list(PATH_WORDS))
+def test_unusable_paths_are_refused_by_flag_in_the_cli(tmp_path, capsys, bad_paths, kind):
+    from leakpath import cli
+
+    bad = bad_paths[kind]
+    spec = "rmd:m=3,D=2.2,seed=0"
+    for argv, flag in [
+        (["sweep", bad, "--dx", "1", "--out", str(tmp_path / "o")], "SURFACE:"),
+        (["sweep", spec, "--out", bad], "--out:"),
+        (["surface", "rmd", "--m", "3", "--D", "2.2", "--seed", "0", "--out", bad], "--out:"),
+        (["ensemble", "--D", "2.2", "--m", "3", "--surfaces", "1", "--out", bad], "--out:"),
+    ]:
+        assert cli.main(argv) == 2, argv
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and err.startswith(f"leakpath: error: {flag}"), err
+        assert PATH_WORDS[kind] in err and len(err) < 400 and "Traceback" not in err
+
+
+def test_a_5000_character_path_in_a_subprocess(tmp_path):
+    proc = run_cli("sweep", str(tmp_path / ("a" * 5000)), "--dx", "1")
+    line = cli_refused(proc, "SURFACE")
+    assert "too long" in line and len(line) < 400
+
+
+def test_other_os_errors_are_one_short_line():
+    from leakpath.cli import _os_error_text
+
+    text = _os_error_text(PermissionError(13, "Permission denied", "/d/" + "a" * 5000))
+    assert text.startswith("Permission denied: '/d/aaa") and "5003 characters" in text
+    assert len(text) < 200
 
 
 # ---------------------------------------------------------------------------- the CLI

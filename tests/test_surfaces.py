@@ -571,3 +571,35 @@ def test_path_objects_accepted(tmp_path):
     s = Surface(np.ones((3, 3)), 1.0)
     s.save(os.fspath(tmp_path / "x.npz"))
     assert isinstance(load(Path(tmp_path) / "x.npz"), Surface)
+
+
+# ---------------------------------------------------------------------------- generator specs
+class TestSpecs:
+    @pytest.mark.parametrize(
+        "text, repeated",
+        [
+            ("rmd:m=3,D=2.2,m=4,seed=0", "m"),
+            ("rmd:m=3,D=2.2,seed=0,seed=1", "seed"),
+            ("rmd:m=3,D=2.2,D=2.2,seed=0", "D"),  # even the same value twice
+            ("spectral:n=16,shape=32,hurst=0.5,seed=0", "shape"),  # an alias and its target
+        ],
+    )
+    def test_a_repeated_key_is_refused_by_name(self, text, repeated):
+        from leakpath.generators import parse_spec
+
+        with pytest.raises(InvalidArgumentError, match=rf"gives {repeated} twice") as info:
+            parse_spec(text)
+        assert info.value.argument == "surface"
+
+    @pytest.mark.parametrize("text", ["rmd:m=3,D=2.2,seed=0,bogus=1", "rmd:m=3,D=2.2,seed=0,m"])
+    def test_an_unknown_or_malformed_key_is_refused(self, text):
+        from leakpath.generators import parse_spec
+
+        with pytest.raises(InvalidArgumentError, match="unknown or malformed") as info:
+            parse_spec(text)
+        assert info.value.argument == "surface"
+
+    def test_each_key_once_is_accepted(self):
+        from leakpath.generators import parse_spec
+
+        assert parse_spec("rmd:m=3,D=2.2,seed=4") == ("rmd", {"m": 3, "D": 2.2}, 4)

@@ -384,3 +384,181 @@ def test_cli_sigkill_resume_overwrite(tmp_path):
     meta = json.loads((clean / "metadata.json").read_text(encoding="utf-8"))
     assert meta["command"] == "sweep" and meta["surface"]["seed"] == 3
     assert "Delta*" in full.stdout and len(full.stdout.strip().splitlines()) >= 43
+
+
+class _SweepStarted(Exception):
+    """Raised by a stand-in for leakpath.sweep: the command got as far as solving."""
+
+
+@pytest.fixture
+def no_solving(monkeypatch):
+    """Replace the sweep the command line calls; the list records each call."""
+    from leakpath import _sweep
+
+    calls: list[dict] = []
+
+    def fake(surface, **kwargs):
+        calls.append(kwargs)
+        raise _SweepStarted
+
+    monkeypatch.setattr(_sweep, "sweep", fake)
+    return calls
+
+
+@pytest.mark.parametrize(
+    "args, flag",
+    [
+        # --levels 4 gives rows 0 … 4: row 5 and row 99 do not exist.
+        (["sweep", "rmd:m=4,D=2.1,seed=1", "--levels", "4", "--flux-maps", "99"], "--flux-maps"),
+        (["sweep", "rmd:m=4,D=2.1,seed=1", "--levels", "4", "--flux-maps", "2,5"], "--flux-maps"),
+        # Two imposed pressures give rows 0 and 1.
+        (["sweep", "rmd:m=4,D=2.1,seed=1", "--mean-pressures", "0.01,0.02", "--flux-maps", "2"],
+         "--flux-maps"),
+        (["sweep", "rmd:m=4,D=2.1,seed=1", "--no-flow", "--flux-maps", "1"], "--flux-maps"),
+        (["sweep", "rmd:m=4,D=2.1,seed=1", "--mean-pressures", "0.2,0.1"], "--mean-pressures"),
+        # The paper's sweep has 20 levels: rows 0 … 20.
+        (["paper", "--flux-maps", "21"], "--flux-maps"),
+        (["sweep", "rmd:m=3,D=2.2,m=4,seed=0"], "m twice"),
+    ],
+)
+def test_every_option_is_checked_before_solving(tmp_path, capsys, no_solving, args, flag):
+    from leakpath import cli
+
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "table.csv").write_text("an earlier table\n")
+    assert cli.main([*args, "--out", str(out), "--overwrite"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("leakpath: error: ") and flag in err, err
+    assert no_solving == []
+    # Nothing in the output directory was touched.
+    assert (out / "table.csv").read_text() == "an earlier table\n"
+
+
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["sweep", "rmd:m=4,D=2.1,seed=1", "--levels", "4", "--flux-maps", "0,4"],
+        ["sweep", "rmd:m=4,D=2.1,seed=1", "--mean-pressures", "0.01,0.02", "--flux-maps", "1"],
+        ["paper", "--flux-maps", "20"],
+    ],
+)
+def test_rows_that_exist_pass_the_early_checks(tmp_path, capsys, no_solving, args):
+    from leakpath import cli
+
+    assert cli.main([*args, "--out", str(tmp_path / "out")]) == 1  # the stand-in's exception
+    assert len(no_solving) == 1
+
+
+# ---------------------------------------------------------------------------- --overwrite
+def files_in(directory) -> set[str]:
+    """Every file below ``directory``, relative, in POSIX form."""
+    return {p.relative_to(directory).as_posix() for p in directory.rglob("*") if p.is_file()}
+
+
+def run_main(capsys, *argv: str) -> str:
+    """Run the CLI in this process; returns its stderr, asserting success."""
+    from leakpath import cli
+
+    status = cli.main(list(argv))
+    err = capsys.readouterr().err
+    assert status == 0, err
+    return err
+
+
+RUN_1 = ["sweep", "rmd:m=4,D=2.2,seed=1", "--levels", "6", "--keep-fields"]
+RUN_2 = ["sweep", "rmd:m=4,D=2.2,seed=2", "--levels", "3"]
+USER_FILES = {
+    "figures/fig_my_notes.pdf": "my own figure",  # named like the run's figures
+    "notes.txt": "keep me",
+    "checkpoints/level_0099.json": "{\"mine\": true}",  # named like a checkpoint record
+    "flux_k01.png": "a file of the user's at the top level",
+}
+
+
+def add_user_files(out) -> None:
+    for rel, text in USER_FILES.items():
+        (out / rel).parent.mkdir(parents=True, exist_ok=True)
+        (out / rel).write_text(text)
+
+
+def assert_user_files_intact(out) -> None:
+    for rel, text in USER_FILES.items():
+        assert (out / rel).read_text() == text, rel
+
+
+@pytest.fixture(scope="module")
+def run_2_files(tmp_path_factory) -> set[str]:
+    """What RUN_2 writes into an empty directory (the reference listing)."""
+    from leakpath import cli
+
+    out = tmp_path_factory.mktemp("fresh") / "out"
+    assert cli.main([*RUN_2, "--out", str(out)]) == 0
+    return files_in(out)
+
+
+def test_overwrite_removes_exactly_the_files_the_earlier_run_wrote(tmp_path, capsys, run_2_files):
+    out = tmp_path / "out"
+    run_main(capsys, *RUN_1, "--out", str(out))
+    first = files_in(out)
+    add_user_files(out)
+    err = run_main(capsys, *RUN_2, "--out", str(out), "--overwrite")
+    assert_user_files_intact(out)
+    # The earlier run's files that this run does not write are gone (its level 4 … 6
+    # checkpoints, fields.npz, maps of other rows); nothing else is there.
+    assert files_in(out) == run_2_files | set(USER_FILES)
+    assert {"fields.npz", "checkpoints/level_0006.json"} <= first - run_2_files
+    assert "note" not in err
+
+
+def test_overwrite_keeps_a_recorded_file_that_changed_since(tmp_path, capsys, run_2_files):
+    out = tmp_path / "out"
+    run_main(capsys, *RUN_1, "--out", str(out))
+    with open(out / "fields.npz", "ab") as fh:  # the user appended to it: no longer the run's
+        fh.write(b"edited")
+    err = run_main(capsys, *RUN_2, "--out", str(out), "--overwrite")
+    assert (out / "fields.npz").read_bytes().endswith(b"edited")
+    assert "fields.npz" in err and "changed" in err
+    assert files_in(out) == run_2_files | {"fields.npz"}
+
+
+def test_overwrite_without_a_record_deletes_nothing_it_cannot_recognise(
+    tmp_path, capsys, run_2_files
+):
+    # A directory from a leakpath without the record: only checkpoint records, recognised by
+    # their checksums, are known to be leakpath's (and a different sweep needs them gone).
+    out = tmp_path / "out"
+    run_main(capsys, *RUN_1, "--out", str(out))
+    (out / ".leakpath-outputs.json").unlink()
+    first = files_in(out)
+    add_user_files(out)
+    err = run_main(capsys, *RUN_2, "--out", str(out), "--overwrite")
+    assert_user_files_intact(out)
+    old_checkpoints = {f for f in first if f.startswith("checkpoints/")}
+    stays = (first - old_checkpoints) | set(USER_FILES)
+    assert files_in(out) == run_2_files | stays
+    assert "no record" in err
+
+
+def test_overwrite_never_follows_a_record_out_of_the_directory(tmp_path, capsys):
+    out = tmp_path / "out"
+    run_main(capsys, *RUN_2, "--out", str(out))
+    outside = tmp_path / "precious.txt"
+    outside.write_text("outside the output directory")
+    info = outside.stat()
+    stamp = {"size": info.st_size, "mtime_ns": info.st_mtime_ns}
+    record = json.loads((out / ".leakpath-outputs.json").read_text())
+    record["files"]["../precious.txt"] = stamp
+    record["files"][str(outside)] = stamp
+    (out / ".leakpath-outputs.json").write_text(json.dumps(record))
+    run_main(capsys, *RUN_2, "--out", str(out), "--overwrite")
+    assert outside.read_text() == "outside the output directory"
+
+
+def test_paper_overwrite_keeps_a_users_figure(tmp_path, capsys):
+    out = tmp_path / "paper"
+    run_main(capsys, "paper", "--no-flow", "--out", str(out))
+    (out / "figures" / "fig_my_notes.pdf").write_text("my own figure")
+    run_main(capsys, "paper", "--no-flow", "--out", str(out), "--overwrite")
+    assert (out / "figures" / "fig_my_notes.pdf").read_text() == "my own figure"
+    assert (out / "table.csv").is_file()

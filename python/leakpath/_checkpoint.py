@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from . import leakage
+from . import _validate, leakage
 from ._io import atomic_write_bytes, atomic_write_text, dumps, pack, pack_mask, unpack, unpack_mask
 from ._table import _LEVEL_COLUMNS, _TYPES, _coerce_cell
 from .errors import InvalidArgumentError
@@ -77,7 +77,7 @@ class _Checkpoint:
     """
 
     def __init__(self, directory: PathLike, manifest: dict[str, Any], keep_fields: bool):
-        self.dir = Path(directory)
+        self.dir = _validate.path("checkpoint_dir", directory)
         self.keep_fields = keep_fields
         self.recomputed: list[tuple[int, str]] = []
         if self.dir.exists() and not self.dir.is_dir():
@@ -85,7 +85,7 @@ class _Checkpoint:
                 f"checkpoint_dir: {str(self.dir)!r} exists and is not a directory",
                 argument="checkpoint_dir",
             )
-        self.dir.mkdir(parents=True, exist_ok=True)
+        _validate.make_directory("checkpoint_dir", self.dir)
         for stale in self.dir.glob(".*.tmp"):  # left by a run killed while writing
             try:
                 stale.unlink()
@@ -226,3 +226,43 @@ def _differences(found: Any, wanted: Any, prefix: str = "") -> list[str]:
     return [] if found == wanted else [prefix.rstrip(".") or "manifest"]
 
 
+
+
+_MANIFEST_KEYS = frozenset({"format", "leakpath_version", "surface_sha256", "shape", "parameters"})
+
+
+def own_files(directory: Path) -> list[Path]:
+    """The files in ``directory`` that leakpath's checkpoints wrote, recognised by content.
+
+    The manifest (its keys), each level record whose checksum matches its content, the
+    fields file whose SHA-256 its level record carries, and leftover temporaries of atomic
+    writes. Anything else — a user's file, an edited record — is not listed.
+    """
+    from ._outputs import is_temporary
+
+    if not directory.is_dir():
+        return []
+    own: list[Path] = []
+    manifest = directory / "manifest.json"
+    try:
+        found = json.loads(manifest.read_text(encoding="utf-8"))
+        if isinstance(found, dict) and _MANIFEST_KEYS <= found.keys():
+            own.append(manifest)
+    except (OSError, ValueError):
+        pass
+    for record in sorted(directory.glob("level_*.json")):
+        try:
+            data = json.loads(record.read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            continue
+        if not isinstance(data, dict) or data.get("sha256") != _record_digest(data):
+            continue
+        own.append(record)
+        fields = record.with_suffix(".npz")
+        try:
+            if hashlib.sha256(fields.read_bytes()).hexdigest() == data.get("fields_sha256"):
+                own.append(fields)
+        except OSError:
+            pass
+    own += [p for p in directory.glob(".*.tmp") if is_temporary(p) and p.is_file()]
+    return own

@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from . import _validate
 from ._core import __version__
 
 PathLike = str | os.PathLike[str]
@@ -56,9 +57,11 @@ def atomic_write_bytes(path: PathLike, data: bytes, *, overwrite: bool = True) -
     sees a partial file. The directory must exist. ``overwrite=False`` links the file into
     place instead, which fails with ``FileExistsError`` if ``path`` exists.
     """
-    target = Path(path)
+    target = _validate.path("path", path)
     directory = target.parent if str(target.parent) else Path(".")
-    tmp = directory / f".{target.name}.{os.getpid()}.{secrets.token_hex(6)}.tmp"
+    # The name is cut so that a target name near the file system's limit still has a
+    # temporary: ".<name>.<pid>.<token>.tmp" adds about 30 characters.
+    tmp = directory / f".{target.name[:120]}.{os.getpid()}.{secrets.token_hex(6)}.tmp"
     fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0), 0o666)
     try:
         with os.fdopen(fd, "wb") as fh:

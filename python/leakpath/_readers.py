@@ -23,7 +23,7 @@ import numpy as np
 import numpy.typing as npt
 
 from . import _validate
-from .errors import InvalidArgumentError, LeakpathError
+from .errors import InvalidArgumentError, LeakpathError, ProblemTooLargeError
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -78,15 +78,15 @@ def _resolve_dx(path: Path, dx_file: float | None, dx_arg: float | None) -> floa
 
 def _check_path(path: Any) -> tuple[Path, os.stat_result]:
     """A path to an existing regular file (never a FIFO or device, which could block)."""
-    if isinstance(path, (bytes, bool)) or not isinstance(path, (str, os.PathLike)):
-        raise InvalidArgumentError(
-            f"path: must be a file path (str or os.PathLike), got {_validate.describe(path)}"
-        )
-    p = Path(path)
+    p = _validate.path("path", path)  # NUL, too long, symlink loops: refused by name
     try:
         info = os.stat(p)
     except FileNotFoundError:
         raise FileNotFoundError(f"surface file {str(p)!r} not found") from None
+    except OSError as exc:  # changed since the check above
+        raise InvalidArgumentError(
+            f"path: cannot read {_validate.show_path(p)} ({exc.strerror})", argument="path"
+        ) from None
     if stat.S_ISDIR(info.st_mode):
         raise InvalidArgumentError(f"path: {str(p)!r} is a directory, not a surface file")
     if not stat.S_ISREG(info.st_mode):
@@ -110,14 +110,95 @@ def _check_file_size(path: Path, size: int, factor: int) -> None:
         )
 
 
+#: Bytes per height point beyond the array as stored: the float64 copy of the heights and
+#: one working copy (undefined points, fill) that :func:`leakpath.load` may make.
+_WORK_BYTES_PER_POINT = 16
+
+
+def _npy_header(fh: Any) -> tuple[int, int] | None:
+    """``(points, bytes)`` an ``.npy`` stream declares in its header (shape × dtype), read
+    without reading the data; ``None`` when the header cannot be parsed (the reader that
+    follows reports the file)."""
+    fmt = np.lib.format
+    try:
+        version = fmt.read_magic(fh)
+        if version == (1, 0):
+            shape, _, dtype = fmt.read_array_header_1_0(fh)
+        elif version == (2, 0):
+            shape, _, dtype = fmt.read_array_header_2_0(fh)
+        else:  # format 3.0 (UTF-8 field names) has no public reader
+            shape, _, dtype = fmt._read_array_header(fh, version)
+    except Exception:  # a damaged header is reported when the array itself is read
+        return None
+    points = math.prod(int(n) for n in shape)
+    return points, points * max(int(dtype.itemsize), 1)
+
+
+def _check_read_estimate(path: Path, estimate: int) -> None:
+    """Refuse reading ``path`` when ``estimate`` bytes exceed the memory budget."""
+    limit = _validate.memory_budget()
+    if estimate > limit:
+        size = _validate.format_bytes(path.stat().st_size)
+        raise _validate.too_large(
+            "path",
+            f"reading {str(path)!r} ({size} on disk; its arrays as declared in their headers, "
+            "then as float64)",
+            estimate,
+            limit,
+            "crop or downsample the file first",
+        )
+
+
+def _npz_estimate(path: Path) -> int:
+    """Bytes reading an ``.npz`` needs, from its members' headers alone: each member's
+    uncompressed size (zip directory) or the shape × dtype its ``.npy`` header declares,
+    whichever is larger, plus the float64 working copies of the largest one (the heights)."""
+    total, largest = 0, 0
+    with zipfile.ZipFile(path) as archive:
+        for info in archive.infolist():
+            size = int(info.file_size)
+            if info.filename.endswith(".npy"):
+                with archive.open(info) as fh:
+                    declared = _npy_header(fh)
+                if declared is not None:
+                    points, nbytes = declared
+                    size = max(size, nbytes)
+                    largest = max(largest, points)
+            total += size
+    return total + _WORK_BYTES_PER_POINT * largest
+
+
+def _npy_estimate(path: Path, size: int) -> int:
+    """Bytes reading an ``.npy`` needs: its declared array and the float64 working copies."""
+    with open(path, "rb") as fh:
+        declared = _npy_header(fh)
+    if declared is None:
+        return 2 * size
+    points, nbytes = declared
+    return max(size, nbytes) + _WORK_BYTES_PER_POINT * points
+
+
+def memory_error(path: Path, size: int) -> ProblemTooLargeError:
+    """The error for a read of a ``size``-byte file that ran out of memory although its
+    estimate fitted the budget."""
+    limit = _validate.memory_budget()
+    return ProblemTooLargeError(
+        f"path: reading {str(path)!r} ({_validate.format_bytes(size)} on disk) ran out of "
+        f"memory (limit {_validate.format_bytes(limit)}); crop or downsample the file first, "
+        "or free memory",
+        estimate=size,
+        limit=limit,
+        what=f"reading {str(path)!r}",
+    )
+
+
 def _sniff(path: Path) -> bytes:
     with open(path, "rb") as fh:
         return fh.read(_SNIFF_BYTES)
 
 
 def _read_npz(path: Path) -> _Raw:
-    with zipfile.ZipFile(path) as archive:  # sizes before inflating anything
-        _check_file_size(path, sum(info.file_size for info in archive.infolist()), 2)
+    _check_read_estimate(path, _npz_estimate(path))  # from the headers, before inflating
     with np.load(path, allow_pickle=False) as data:
         keys = list(data.files)
         if "heights" in keys:
@@ -380,7 +461,7 @@ def _read_any(path: Path, size: int, dx: float | None) -> _Raw:
     if suffix == ".npy" or (suffix not in TEXT_SUFFIXES and head.startswith(_NPY_MAGIC)):
         if not head.startswith(_NPY_MAGIC):
             raise ValueError("it is not a .npy array file (no NUMPY signature)")
-        _check_file_size(path, size, 2)
+        _check_read_estimate(path, _npy_estimate(path, size))
         return _read_npy(path)
     if suffix in (".txt", ".csv", ".asc"):
         _check_file_size(path, size, 2)

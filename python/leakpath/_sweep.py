@@ -402,6 +402,8 @@ def sweep(
             "and there is no approach to sweep; check the heights (units, a constant file)"
         )
     _validate.choice("solver", solver, SOLVERS)
+    if checkpoint_dir is not None:  # before any solve
+        checkpoint_dir = _validate.path("checkpoint_dir", checkpoint_dir)
     warm_start = _validate.flag("warm_start", warm_start)
     keep_fields = _validate.flag("keep_fields", keep_fields)
     n_levels = _check_levels(levels, surface.shape, keep_fields)

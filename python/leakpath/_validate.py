@@ -16,9 +16,12 @@ Rules that hold everywhere:
 
 from __future__ import annotations
 
+import errno
 import math
 import numbers
+import os
 import sys
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -42,6 +45,9 @@ __all__ = [
     "memory_budget",
     "memory_limit",
     "optional_integer",
+    "make_directory",
+    "path",
+    "show_path",
     "positive",
     "real",
     "real_array",
@@ -413,3 +419,103 @@ def too_large(
         limit=int(limit),
         what=what,
     )
+
+
+# ---------------------------------------------------------------------------- paths
+#: Longest file name (one path component, in bytes) and whole path the checks allow when
+#: the system does not say: the Linux and macOS limits of the common file systems.
+NAME_MAX = 255
+PATH_MAX = 4096
+
+
+def show_path(text: str | os.PathLike[str], limit: int = 80) -> str:
+    """``repr`` of a path for a message, shortened in the middle when it is long."""
+    text = os.fspath(text)
+    if len(text) <= limit:
+        return repr(text)
+    return f"{text[: limit // 2]!r}…{text[-(limit // 4):]!r} ({len(text)} characters)"
+
+
+def _limits(text: str) -> tuple[int, int]:
+    """``(NAME_MAX, PATH_MAX)`` of the file system holding the nearest existing ancestor."""
+    here = Path(text).parent if text else Path(".")
+    for candidate in (here, *here.parents, Path(".")):
+        try:
+            return (
+                int(os.pathconf(candidate, "PC_NAME_MAX")),
+                int(os.pathconf(candidate, "PC_PATH_MAX")),
+            )
+        except (OSError, ValueError, AttributeError):
+            continue
+    return NAME_MAX, PATH_MAX  # pragma: no cover - no pathconf
+
+
+def path(argument: str, value: Any) -> Path:
+    """``value`` as a :class:`~pathlib.Path` the operating system can use.
+
+    Refused by name: a value that is not a ``str`` or ``os.PathLike``, a path holding a NUL
+    character, a file name or path longer than the file system allows, a path that runs
+    into a loop of symbolic links or through a file as if it were a directory, and one that
+    cannot be looked up at all (permissions). Whether it exists is left to the caller.
+    """
+    if isinstance(value, (bytes, bool)) or not isinstance(value, (str, os.PathLike)):
+        raise InvalidArgumentError(
+            f"{argument}: must be a file path (str or os.PathLike), got {describe(value)}",
+            argument=argument,
+        )
+    text = os.fspath(value)
+    if not isinstance(text, str):
+        raise InvalidArgumentError(
+            f"{argument}: must be a text path, got the bytes path {describe(text)}",
+            argument=argument,
+        )
+    shown = show_path(text)
+    if "\x00" in text:
+        raise InvalidArgumentError(
+            f"{argument}: {shown} contains a NUL character, which no path may hold; "
+            "remove it",
+            argument=argument,
+        )
+    name_max, path_max = _limits(text)
+    longest = max((len(os.fsencode(part)) for part in Path(text).parts), default=0)
+    if len(os.fsencode(text)) >= path_max or longest > name_max:
+        raise InvalidArgumentError(
+            f"{argument}: {shown} is too long for the file system (names of at most "
+            f"{name_max} bytes, paths under {path_max}); use a shorter path",
+            argument=argument,
+        )
+    try:
+        os.stat(text)
+    except FileNotFoundError:
+        pass  # the caller decides whether it must exist
+    except OSError as exc:
+        why = {
+            errno.ELOOP: "runs into a loop of symbolic links; fix or remove the link",
+            errno.ENAMETOOLONG: "is too long for the file system; use a shorter path",
+            errno.ENOTDIR: "goes through a file as if it were a directory; check the path",
+        }.get(exc.errno or 0, f"cannot be looked up ({exc.strerror}); check the path")
+        raise InvalidArgumentError(f"{argument}: {shown} {why}", argument=argument) from None
+    except ValueError as exc:  # anything else the platform refuses in a path
+        raise InvalidArgumentError(
+            f"{argument}: {shown} is not a usable path ({exc})", argument=argument
+        ) from None
+    return Path(text)
+
+
+def make_directory(argument: str, directory: Path) -> Path:
+    """Create ``directory`` (and its parents) if needed; a failure is refused by name."""
+    try:
+        directory.mkdir(parents=True, exist_ok=True)
+    except FileExistsError:
+        raise InvalidArgumentError(
+            f"{argument}: {show_path(directory)} exists and is not a directory; choose "
+            "another path",
+            argument=argument,
+        ) from None
+    except OSError as exc:
+        raise InvalidArgumentError(
+            f"{argument}: cannot create the directory {show_path(directory)} "
+            f"({exc.strerror}); choose a path you can write to",
+            argument=argument,
+        ) from None
+    return directory

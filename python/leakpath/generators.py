@@ -514,6 +514,7 @@ def parse_spec(text: str) -> tuple[str, dict[str, Any], int] | None:
     params: dict[str, Any] = {}
     seed: int | None = None
     keys = ", ".join(f"{k}=" for k in (*gen.aliases, *gen.parameters, "seed"))
+    given: dict[str, str] = {}  # canonical key -> the item that gave it
     for item in filter(None, (part.strip() for part in rest.split(","))):
         key, eq, value = item.partition("=")
         key = key.strip().replace("-", "_")
@@ -524,6 +525,13 @@ def parse_spec(text: str) -> tuple[str, dict[str, Any], int] | None:
                 f"{gen.name} takes {keys}",
                 argument="surface",
             )
+        if key in given:  # never let a later value silently win
+            raise InvalidArgumentError(
+                f"surface: spec {text!r} gives {key} twice ({given[key]!r} and {item!r}); "
+                "give each parameter once",
+                argument="surface",
+            )
+        given[key] = item
         try:
             if key == "seed":
                 seed = int(value.strip())

@@ -240,10 +240,6 @@ def flow_star(row: dict[str, Any], k_ref: float) -> float:
 
 
 # ---------------------------------------------------------------------------- command line
-#: Figure files of :mod:`leakpath.flow_figures` (for ``--overwrite`` to clear).
-FIGURE_PATTERNS: tuple[str, ...] = ("flux_k*.png", "flux_k*.pdf")
-
-
 def _level_list(text: str) -> list[int]:
     import argparse
 

@@ -40,8 +40,9 @@ from ._readers import (
     _one_line,
     _read_any,
     _resolve_dx,
+    memory_error,
 )
-from .errors import InvalidArgumentError, LeakpathError
+from .errors import InvalidArgumentError, LeakpathError, ProblemTooLargeError
 from .moments import Moments, nayak_moments
 
 __all__ = ["Surface", "load", "FILL_METHODS", "TEXT_SUFFIXES"]
@@ -236,12 +237,8 @@ class Surface:
         FileNotFoundError
             The target directory does not exist.
         """
-        if isinstance(path, (bytes, bool)) or not isinstance(path, (str, os.PathLike)):
-            raise InvalidArgumentError(
-                f"path: must be a file path (str or os.PathLike), got {_validate.describe(path)}"
-            )
+        target = _validate.path("path", path)
         overwrite = _validate.flag("overwrite", overwrite)
-        target = Path(path)
         if target.suffix.lower() != ".npz":
             raise ValueError(f"path must end in '.npz' to save a surface, got {str(target)!r}")
         try:
@@ -329,7 +326,9 @@ def load(path: PathLike, *, dx: float | None = None, fill: str | None = None) ->
         complex or non-numeric data, not a 2-D matrix, or undefined points without
         ``fill``; ``dx`` missing, invalid or different from the file's; bad ``fill``.
     ProblemTooLargeError (a ``MemoryError``)
-        A file too large to read into memory.
+        A file too large to read into memory: sized before reading from the shapes and
+        dtypes its ``.npy`` headers declare (an ``.npz`` by its members' uncompressed sizes
+        too) plus the float64 copies, or a read that ran out of memory anyway.
     ImportError
         A non-native format without the optional SurfaceTopography package.
     """
@@ -337,8 +336,18 @@ def load(path: PathLike, *, dx: float | None = None, fill: str | None = None) ->
     method = None if fill is None else _validate.choice("fill", fill, FILL_METHODS)
     p, info = _check_path(path)
     try:
-        raw = _read_any(p, info.st_size, dx_arg)
-    except (ImportError, FileNotFoundError, LeakpathError):
+        return _load_checked(p, info.st_size, dx_arg, method)
+    except ProblemTooLargeError:
+        raise
+    except MemoryError:  # the estimate fitted, the allocation did not
+        raise memory_error(p, info.st_size) from None
+
+
+def _load_checked(p: Path, size: int, dx_arg: float | None, method: str | None) -> Surface:
+    """:func:`load` of a checked path and arguments."""
+    try:
+        raw = _read_any(p, size, dx_arg)
+    except (ImportError, FileNotFoundError, LeakpathError, MemoryError):
         raise
     except Exception as exc:  # corrupt archives, unreadable files, reader failures
         raise InvalidArgumentError(

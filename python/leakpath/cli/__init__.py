@@ -34,6 +34,7 @@ import traceback
 from collections.abc import Callable, Sequence
 
 from .._core import __version__
+from .._validate import show_path
 from ..errors import LeakpathError
 from ._common import (
     PROG,
@@ -102,6 +103,15 @@ def _fail(message: str, status: int) -> int:
     return status
 
 
+def _os_error_text(exc: OSError) -> str:
+    """An ``OSError`` as one readable line: a long file name is shortened in the middle."""
+    if exc.strerror and exc.filename is not None:
+        names = [exc.filename] + ([exc.filename2] if exc.filename2 is not None else [])
+        shown = " -> ".join(show_path(os.fsdecode(n)) for n in names)
+        return f"{exc.strerror}: {shown}"
+    return str(exc)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; returns the process exit status."""
     parser = build_parser()
@@ -134,7 +144,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except OSError as exc:
         if debug:
             traceback.print_exc()
-        return _fail(str(exc), 1)
+        return _fail(_os_error_text(exc), 1)
     except Exception as exc:  # a defect or an environment failure: name it, one line
         if debug:
             traceback.print_exc()

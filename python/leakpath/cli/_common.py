@@ -6,11 +6,13 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
-from .. import _validate, leakage
+from .. import _validate
+from .._outputs import RECORD_NAME, OutputRecord
 from ..errors import InvalidArgumentError
 from ..generators import _shape_text, generate, parse_spec
 from ..moments import nayak_moments
@@ -127,6 +129,7 @@ def _print_json(payload: Any, default: Callable[[Any], Any] = str) -> None:
 
 
 def _check_out(path: Path, overwrite: bool) -> None:
+    _validate.path("--out", path)
     if path.suffix.lower() != ".npz":
         raise UsageError(f"--out must end in '.npz', got {str(path)!r}")
     if path.exists() and not overwrite:
@@ -195,7 +198,7 @@ def _surface_from_arg(text: str, dx: float | None, fill: str | None = None) -> S
         if fill is not None:
             raise UsageError("--fill applies to surface files only, not to a generator spec")
         return generate(gen, params, seed)
-    path = Path(text)
+    path = _validate.path("SURFACE", text)
     if not path.exists():
         raise UsageError(
             f"SURFACE {text!r} is neither an existing file nor a spec such as "
@@ -204,21 +207,17 @@ def _surface_from_arg(text: str, dx: float | None, fill: str | None = None) -> S
     return load(path, dx=dx, fill=fill)
 
 
-_OWN_PATTERNS = {
-    CHECKPOINT_DIR: ("manifest.json", "level_*.json", "level_*.npz", ".*.tmp"),
-    FIGURES_DIR: ("fig*.png", "fig*.pdf", "map_k*.png", "map_k*.pdf", ".*.tmp")
-    + leakage.FIGURE_PATTERNS,
-}
-
-
-def _prepare_outdir(out: Path, *, overwrite: bool, resume: bool) -> None:
+def _prepare_outdir(out: Path, *, overwrite: bool, resume: bool) -> OutputRecord:
     """Refuse a non-empty output directory unless ``--overwrite``/``--resume``; create it.
 
-    ``--overwrite`` deletes only the files a sweep writes (checkpoints, figures, table,
-    metadata, surface, fields), nothing else in the directory.
+    Returns the record of the files this run writes (:mod:`leakpath._outputs`); with
+    ``--resume`` it keeps the earlier run's entries. ``--overwrite`` deletes only the files
+    an earlier run recorded there and left unchanged, and checkpoint files recognised by
+    their checksums; anything else stays, and a note on stderr says so.
     """
     if overwrite and resume:
         raise UsageError("--overwrite and --resume exclude each other")
+    _validate.path("--out", out)
     if out.exists() and not out.is_dir():
         raise UsageError(f"--out {str(out)!r} exists and is not a directory")
     non_empty = out.is_dir() and any(out.iterdir())
@@ -232,16 +231,52 @@ def _prepare_outdir(out: Path, *, overwrite: bool, resume: bool) -> None:
             f"nothing to resume in {str(out)!r} (no {CHECKPOINT_DIR}/ directory); "
             "run without --resume, or with --overwrite"
         )
+    record = OutputRecord(out)
     if overwrite and non_empty:
-        for sub, patterns in _OWN_PATTERNS.items():
-            for pattern in patterns:
-                for f in (out / sub).glob(pattern):
-                    if f.is_file():
-                        f.unlink()
-        for name in (TABLE_NAME, METADATA_NAME, SURFACE_NAME, FIELDS_NAME):
-            if (out / name).is_file():
-                (out / name).unlink()
-    out.mkdir(parents=True, exist_ok=True)
+        _clear_earlier_run(out, record)
+    elif resume:
+        record.read()  # the resumed run adds to the earlier run's files
+    _validate.make_directory("--out", out)
+    return record
+
+
+def _clear_earlier_run(out: Path, record: OutputRecord) -> None:
+    """Delete what an earlier run in ``out`` provably wrote; note on stderr what stays."""
+    from .._checkpoint import own_files
+    from ..plotting.paper import remove_stale_temporaries
+
+    had_record = record.read()
+    changed = record.remove_unchanged() if had_record else []
+    for f in own_files(out / CHECKPOINT_DIR):
+        f.unlink()
+    for directory in (out, out / FIGURES_DIR):
+        if directory.is_dir():
+            remove_stale_temporaries(directory)
+    left = sorted(
+        p.relative_to(out).as_posix()
+        for p in out.rglob("*")
+        if p.is_file() or p.is_symlink()
+    )
+    if changed:
+        _note(
+            f"--overwrite kept {len(changed)} file(s) in {str(out)!r} that changed since the "
+            f"earlier run wrote them: {_listing(changed)}"
+        )
+    if not had_record and left:
+        _note(
+            f"--overwrite: {str(out)!r} holds no record of the files an earlier run wrote "
+            f"({RECORD_NAME}), so only its checkpoints were removed; {len(left)} other "
+            f"file(s) stay unless this run rewrites them: {_listing(left)}"
+        )
+
+
+def _listing(names: Sequence[str], limit: int = 5) -> str:
+    shown = ", ".join(names[:limit])
+    return shown + (f" and {len(names) - limit} more" if len(names) > limit else "")
+
+
+def _note(message: str) -> None:
+    print(f"{PROG}: note: {_one_line(message)}", file=sys.stderr)
 
 
 def format_summary(rows: Sequence[dict[str, Any]]) -> str:
@@ -278,7 +313,8 @@ def _add_sweep_output_arguments(p: argparse.ArgumentParser, default_out: str) ->
     p.add_argument(
         "--overwrite",
         action="store_true",
-        help="replace the results in a non-empty --out directory",
+        help="replace an earlier run's results in a non-empty --out directory (only the "
+        "files it recorded writing, unchanged since; nothing else is deleted)",
     )
     p.add_argument(
         "--resume",

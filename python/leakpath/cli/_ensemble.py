@@ -9,6 +9,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from .. import _validate
 from ._common import (
     PROG,
     UsageError,
@@ -98,6 +99,7 @@ def _cmd_ensemble(args: argparse.Namespace) -> int:
         raise UsageError("--workers sizes local processes; with --scheduler size the cluster")
     if args.resume and args.overwrite:
         raise UsageError("--resume and --overwrite exclude each other")
+    _validate.path("--out", args.out)
     try:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", RuntimeWarning)

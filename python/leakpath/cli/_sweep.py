@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from .. import leakage
+from ..errors import InvalidArgumentError
 from ..experiments import PAPER, paper_surface
 from ..surfaces import FILL_METHODS, Surface
 from ._common import (
@@ -53,18 +54,26 @@ def _run_sweep(
 ) -> int:
     """Run a sweep into ``args.out`` and print its summary (table or JSON)."""
     from .._checkpoint import CheckpointMismatch
-    from .._sweep import _check_levels, sweep
+    from .._sweep import _check_levels, _resolve_mean_pressures, sweep
     from ..contact import contact_modulus
 
     out: Path = args.out
-    contact_modulus(E, nu)  # validate before touching the output directory
+    # Every option is checked before the output directory is touched or anything is solved.
+    contact_modulus(E, nu)
     _check_levels(levels, surface.shape, keep_fields)
+    n_rows = levels + 1
+    if mean_pressures is not None:
+        try:
+            n_rows = len(_resolve_mean_pressures(mean_pressures))
+        except InvalidArgumentError as exc:
+            raise UsageError(f"--mean-pressures: {str(exc).split(': ', 1)[-1]}") from None
+    _check_flux_maps(args.flux_maps, n_rows, leakage.flow_enabled(args.flow, surface.shape))
     if not surface.height_range > 0:
         raise UsageError(
             "SURFACE is flat (h_s = max h - min h = 0): the flat touches every point at once "
             "and there is no approach to sweep; check the file's heights"
         )
-    _prepare_outdir(out, overwrite=args.overwrite, resume=args.resume)
+    record = _prepare_outdir(out, overwrite=args.overwrite, resume=args.resume)
     try:
         result = sweep(
             surface,
@@ -92,14 +101,19 @@ def _run_sweep(
         "metadata": out / METADATA_NAME,
         "surface": out / SURFACE_NAME,
     }
-    surface.save(files["surface"], overwrite=True)
-    result.to_csv(files["table"])
+    # Each file is recorded as soon as it is written, so that a later --overwrite removes
+    # exactly this run's files even if the run stops part-way.
+    record.add([surface.save(files["surface"], overwrite=True)])
+    record.add([result.to_csv(files["table"])])
     if keep_fields:
         files["fields"] = result.save_fields(out / FIELDS_NAME)
+        record.add([files["fields"]])
     figures = result.plot(out / FIGURES_DIR)
+    record.add(figures)
     from ..plotting.flow import save_flow_figures  # leak-rate figures (fig4, flux maps)
 
     figures += save_flow_figures(result, out / FIGURES_DIR, flux_levels=args.flux_maps)
+    record.add(figures)
     extra = {
         "command": command,
         "argv": list(argv) if argv is not None else sys.argv[1:],
@@ -110,7 +124,7 @@ def _run_sweep(
             "checkpoints": str(out / CHECKPOINT_DIR),
         },
     }
-    result.to_json(files["metadata"], extra=extra)
+    record.add([result.to_json(files["metadata"], extra=extra)])
     summary = [{key: row[key] for key, _ in _SUMMARY_COLUMNS} for row in result.rows]
     if args.json:
         payload = {
@@ -133,6 +147,23 @@ def _run_sweep(
             f"{out / FIGURES_DIR}"
         )
     return 0
+
+
+def _check_flux_maps(rows: Sequence[int] | None, n_rows: int, flow_on: bool) -> None:
+    """Refuse ``--flux-maps`` rows the sweep will not have, before it runs."""
+    if rows is None:
+        return
+    if not flow_on:
+        raise UsageError(
+            "--flux-maps: this sweep computes no leak rates (--no-flow, or the default above "
+            "513 x 513 points); pass --flow, or drop --flux-maps"
+        )
+    bad = [k for k in rows if not 0 <= k < n_rows]
+    if bad:
+        raise UsageError(
+            f"--flux-maps: row {bad[0]} does not exist, the sweep has rows 0 to {n_rows - 1}; "
+            "give row indices in that range"
+        )
 
 
 def _cmd_paper(args: argparse.Namespace) -> int:

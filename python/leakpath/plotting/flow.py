@@ -30,6 +30,7 @@ from matplotlib.axes import Axes
 from matplotlib.colors import LogNorm
 from matplotlib.figure import Figure
 
+from .. import _validate
 from .._flow import Flow, flow
 from ..errors import InvalidArgumentError
 from ._types import SweepLike as SweepResult
@@ -208,8 +209,8 @@ def save_flow_figures(
                 f"flux_levels: row indices must lie in 0…{n - 1}, got {k!r}",
                 argument="flux_levels",
             )
-    out = Path(outdir)
-    out.mkdir(parents=True, exist_ok=True)
+    out = _validate.path("outdir", outdir)
+    _validate.make_directory("outdir", out)
     paths = save_figure(figure_leak_rate(result), out / "fig4_leak_rate", formats, dpi)
     for k in levels:
         paths += save_figure(figure_flux_map(result, int(k)), out / f"flux_k{int(k):02d}",

@@ -35,6 +35,7 @@ from matplotlib.colors import BoundaryNorm, ListedColormap
 from matplotlib.figure import Figure
 from matplotlib.patches import Patch
 
+from .. import _validate
 from .._io import atomic_write_bytes
 from ._types import SurfaceLike as Surface
 from ._types import SweepLike as SweepResult
@@ -350,8 +351,8 @@ def save_paper_figures(
     for k in levels:
         if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or not 0 <= k < n:
             raise ValueError(f"levels_to_map: row indices must lie in 0…{n - 1}, got {k!r}")
-    out = Path(outdir)
-    out.mkdir(parents=True, exist_ok=True)
+    out = _validate.path("outdir", outdir)
+    _validate.make_directory("outdir", out)
     remove_stale_temporaries(out)
     paths: list[Path] = []
     paths += save_figure(
