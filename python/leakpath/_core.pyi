@@ -131,7 +131,7 @@ def solve_polonsky_keer(
 
     ``heights``: float64 array ``(ny, nx)``, finite. ``tol``: stop when the KKT certificate
     ``max(−min g, max_{p>0} |g|, Σ p|g| / Σ p) / (max h − min h)`` is ``≤ tol`` (default
-    ``1e-10``). ``max_iter``: default ``max(5000, ⌈100·N^¼⌉)``; exceeding it raises
+    ``1e-12``). ``max_iter``: default ``max(5000, ⌈100·N^¼⌉)``; exceeding it raises
     ``RuntimeError``. ``initial_pressure``: warm start (same shape; negatives clipped; rescaled
     to the load in load control); cold start is ``p = 0`` (displacement) or uniform ``p̄``
     (load). ``memory_limit`` (bytes, default :func:`leakpath._memory.memory_limit`):
