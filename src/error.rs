@@ -79,6 +79,8 @@ impl fmt::Display for Error {
 
 impl std::error::Error for Error {}
 
+pub type Result<T> = std::result::Result<T, Error>;
+
 /// `n` bytes in the largest binary unit it reaches (bytes, KiB, MiB, GiB, TiB), three
 /// significant digits: the same text as `leakpath._validate.format_bytes`.
 pub fn format_bytes(n: u64) -> String {
@@ -142,5 +144,3 @@ mod tests {
         assert!(text.contains("limit of 10 bytes"), "{text}");
     }
 }
-
-pub type Result<T> = std::result::Result<T, Error>;

@@ -2119,7 +2119,13 @@ mod tests {
                 let s = solve(&pr, control, &opts(tol)).unwrap();
                 assert!(s.kkt <= tol, "{boundary:?} {control:?}: {}", s.kkt);
                 let (hmax, hmin, _) = height_stats(&h);
-                let again = kkt_certificate(&s.pressure, &s.gap, hmax - hmin);
+                // The documented scale: max(h_s, Δ), or max(h_s, |Δ|, p̄·C_00) under a load.
+                let c00 = love_displacement(0.0, 0.0, pr.dx, pr.e_star);
+                let scale = match control {
+                    Control::Approach(d) => (hmax - hmin).max(d),
+                    Control::MeanPressure(m) => (hmax - hmin).max(s.approach.abs()).max(m * c00),
+                };
+                let again = kkt_certificate(&s.pressure, &s.gap, scale);
                 assert_eq!(again, s.kkt);
                 assert!(s.pressure.iter().all(|&v| v >= 0.0));
                 assert_eq!(
