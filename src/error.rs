@@ -38,7 +38,6 @@ impl fmt::Display for Error {
         match self {
             Error::InvalidArgument { name, message } => write!(f, "{name}: {message}"),
             Error::TooLarge { bytes, limit, what } => {
-                let gib = |b: u64| b as f64 / (1u64 << 30) as f64;
                 if *bytes == u64::MAX {
                     write!(
                         f,
@@ -47,21 +46,21 @@ impl fmt::Display for Error {
                 } else if *limit == 0 {
                     write!(
                         f,
-                        "{what} needs {:.2} GiB and the system refused to allocate it (memory \
-                         in use, an address-space ulimit or a container memory limit); use a \
-                         smaller grid or free memory",
-                        gib(*bytes)
+                        "{what} needs {} and the system refused to allocate it (memory in use, \
+                         an address-space ulimit or a container memory limit); use a smaller \
+                         grid or free memory",
+                        format_bytes(*bytes)
                     )
                 } else {
                     write!(
                         f,
-                        "{what} needs about {:.2} GiB, more than the memory limit of {:.2} GiB \
+                        "{what} needs about {}, more than the memory limit of {} \
                          (memory_limit, by default what this process may still allocate: the \
                          least of the cgroup and ulimit headroom and the available memory, \
                          times a safety fraction); use a smaller grid or pass a larger \
                          memory_limit",
-                        gib(*bytes),
-                        gib(*limit)
+                        format_bytes(*bytes),
+                        format_bytes(*limit)
                     )
                 }
             }
@@ -81,3 +80,67 @@ impl fmt::Display for Error {
 impl std::error::Error for Error {}
 
 pub type Result<T> = std::result::Result<T, Error>;
+
+/// `n` bytes in the largest binary unit it reaches (bytes, KiB, MiB, GiB, TiB), three
+/// significant digits: the same text as `leakpath._validate.format_bytes`.
+pub fn format_bytes(n: u64) -> String {
+    const UNITS: [(&str, u64); 4] = [
+        ("TiB", 1 << 40),
+        ("GiB", 1 << 30),
+        ("MiB", 1 << 20),
+        ("KiB", 1 << 10),
+    ];
+    for (unit, size) in UNITS {
+        if n >= size {
+            return format!("{} {unit}", three_digits(n as f64 / size as f64));
+        }
+    }
+    format!("{n} bytes")
+}
+
+/// `x ≥ 1` with three significant digits and no trailing zeros (as Python's `{:.3g}` below
+/// 1000; above, the whole number).
+fn three_digits(x: f64) -> String {
+    let decimals = if x >= 100.0 {
+        0
+    } else if x >= 10.0 {
+        1
+    } else {
+        2
+    };
+    let mut s = format!("{x:.decimals$}");
+    if s.contains('.') {
+        s = s.trim_end_matches('0').trim_end_matches('.').to_string();
+    }
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn format_bytes_picks_a_readable_unit() {
+        assert_eq!(format_bytes(0), "0 bytes");
+        assert_eq!(format_bytes(10), "10 bytes");
+        assert_eq!(format_bytes(1023), "1023 bytes");
+        assert_eq!(format_bytes(1024), "1 KiB");
+        assert_eq!(format_bytes(1536), "1.5 KiB");
+        assert_eq!(format_bytes(8 << 20), "8 MiB");
+        assert_eq!(format_bytes(3 * (1 << 30) + (1 << 29)), "3.5 GiB");
+        assert_eq!(format_bytes(123_456_789), "118 MiB");
+        assert_eq!(format_bytes(5 << 40), "5 TiB");
+    }
+
+    #[test]
+    fn too_large_message_shows_small_sizes_in_bytes() {
+        let e = Error::TooLarge {
+            bytes: 70_000,
+            limit: 10,
+            what: "x".into(),
+        };
+        let text = e.to_string();
+        assert!(text.contains("68.4 KiB"), "{text}");
+        assert!(text.contains("limit of 10 bytes"), "{text}");
+    }
+}

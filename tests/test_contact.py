@@ -9,6 +9,7 @@ from scipy.optimize import nnls
 import leakpath
 from leakpath import _core
 from leakpath.contact import ContactProblem, solve
+from leakpath.errors import InvalidArgumentError
 
 EXACT_SOLVERS = ["lawson-hanson", "active-set"]
 
@@ -217,9 +218,9 @@ def test_bad_heights():
 def test_too_large_is_refused_with_an_estimate():
     s = leakpath.rmd(5, 2.3, seed=0)
     prob = ContactProblem(s, memory_limit=200 * 1024 * 1024 // 100)  # 2 MiB
-    with pytest.raises(MemoryError, match=r"GiB"):
+    with pytest.raises(MemoryError, match=r"limit of 2 MiB"):
         prob.solve(s.height_range, solver="active-set")
-    with pytest.raises(MemoryError, match=r"GiB"):
+    with pytest.raises(MemoryError, match=r"limit of 1 MiB"):
         ContactProblem(leakpath.rmd(8, 2.3, seed=0), memory_limit=1 << 20)
 
 
@@ -283,3 +284,113 @@ def test_periodic_exact_solvers_equal_reference(solver, shape, seed):
         assert np.max(np.abs(st.pressure.ravel() - p_ref)) <= 1e-9 * scale
         assert st.kkt <= 1e-10
         assert st.gap.min() >= -1e-11 * limit
+
+
+def full_contact_reference(C: np.ndarray, h: np.ndarray, mean_pressure: float):
+    """Full contact under load control is linear: ``C p − Δ 1 = h − max h``, ``Σ p = p̄ N``
+    (a bordered system solved densely by numpy); returns ``(p, Δ)``."""
+    n = h.size
+    a = np.zeros((n + 1, n + 1))
+    a[:n, :n] = C
+    a[:n, n] = -1.0
+    a[n, :n] = 1.0
+    rhs = np.append(h.ravel() - h.max(), mean_pressure * n)
+    x = np.linalg.solve(a, rhs)
+    return x[:n], x[n]
+
+
+@pytest.mark.parametrize("boundary", ["free", "periodic"])
+@pytest.mark.parametrize("mean_pressure", [1e4, 1e6])
+def test_load_control_far_past_full_contact(boundary, mean_pressure):
+    """p̄ ≫ E*: the whole patch is in contact and the answer is the linear full-contact
+    solution. The certificate is relative to max(h_s, |Δ|, p̄·C_00) (round-off of u and Δ
+    is relative to them), so such loads converge instead of stalling at ~1e-12 h_s."""
+    s = leakpath.rmd(5, 2.2, seed=1)
+    dx = s.dx
+    if boundary == "free":
+        C = love_matrix(*s.shape, dx, 1.0)
+    else:
+        C = periodic_matrix(*s.shape, dx, 1.0)
+    p_ref, delta_ref = full_contact_reference(C, s.heights, mean_pressure)
+    assert p_ref.min() > 0  # the reference is a contact solution: p > 0 everywhere
+    st = ContactProblem(s, boundary=boundary).solve(mean_pressure=mean_pressure)
+    assert st.contact_fraction == 1.0
+    assert st.kkt <= 1e-12
+    assert np.max(np.abs(st.pressure.ravel() - p_ref)) <= 1e-9 * p_ref.max()
+    assert st.approach == pytest.approx(delta_ref, rel=1e-9, abs=1e-9 * s.height_range)
+    assert st.mean_pressure == pytest.approx(mean_pressure, rel=1e-12)
+
+
+def test_load_control_refuses_loads_beyond_the_floating_point_range():
+    s = leakpath.rmd(3, 2.2, seed=1)
+    for bad in (1e200, 1e-200):
+        with pytest.raises(InvalidArgumentError, match=r"^mean_pressure: .*1e±250") as info:
+            solve(s, mean_pressure=bad)
+        assert info.value.argument == "mean_pressure"
+
+
+def test_solution_pressures_respect_the_warm_start_bound():
+    """Free boundary: at a contact point C_00 p_i ≤ (C p)_i = Δ − (max h − h_i) ≤ Δ, all
+    C_ij > 0, so p ≤ max(h_s, Δ)/C_00 — the scale against which warm starts are checked."""
+    s = leakpath.rmd(5, 2.3, seed=2)
+    c00 = love_matrix(1, 1, s.dx, 1.0)[0, 0]
+    for frac in (0.2, 1.0, 3.0):
+        a = frac * s.height_range
+        st = solve(s, a, solver="active-set")
+        assert 0 < st.pressure.max() <= a / c00 * (1 + 1e-12)
+
+
+class _Duck:
+    pressure = "1.0"
+    contact = "yes"
+    shape = (33, 33)
+
+
+@pytest.mark.parametrize(
+    "make",
+    [
+        lambda h: np.full(h.shape, 1e300),  # absurd magnitude: C p overflows
+        lambda h: np.full(h.shape, -1.0),  # negative pressures
+        lambda h: np.where(h > 0, np.nan, 0.0),  # NaN
+        lambda h: np.ones((h.shape[0], h.shape[1] + 1)),  # wrong shape
+        lambda h: [[1.0, 2.0], [3.0]],  # ragged
+        lambda h: "pressure",  # a string
+        lambda h: _Duck(),  # duck-typed state with string attributes
+        lambda h: np.full(h.shape, "1.0"),  # an array of strings
+    ],
+    ids=["1e300", "negative", "nan", "shape", "ragged", "string", "duck", "str-array"],
+)
+def test_bad_warm_starts_are_refused_by_name(make):
+    s = leakpath.rmd(5, 2.2, seed=1)
+    prob = ContactProblem(s)
+    with pytest.raises(InvalidArgumentError, match=r"^warm_start: ") as info:
+        prob.solve(0.3 * s.height_range, warm_start=make(s.heights))
+    assert info.value.argument == "warm_start"
+
+
+def test_state_with_bad_fields_is_refused_as_warm_start():
+    import dataclasses
+
+    s = leakpath.rmd(5, 2.2, seed=1)
+    prob = ContactProblem(s)
+    good = prob.solve(0.3 * s.height_range)
+    for pressure in ("abc", np.full(s.shape, "x"), np.full(s.shape, np.inf), np.zeros((3, 3))):
+        bad = dataclasses.replace(good, pressure=pressure)
+        with pytest.raises(InvalidArgumentError, match=r"^warm_start: "):
+            prob.solve(0.3 * s.height_range, warm_start=bad)
+
+
+def test_load_control_rescales_a_large_warm_start():
+    """Load control rescales a start to the load, so any finite magnitude is a valid start:
+    a 1e300 field lands on the cold solution; one whose sum overflows is refused."""
+    s = leakpath.rmd(5, 2.2, seed=1)
+    prob = ContactProblem(s)
+    cold = prob.solve(mean_pressure=0.5, solver="polonsky-keer")
+    warm = prob.solve(
+        mean_pressure=0.5, solver="polonsky-keer", warm_start=np.full(s.shape, 1e300)
+    )
+    assert warm.kkt <= 1e-12
+    np.testing.assert_array_equal(warm.contact, cold.contact)
+    assert np.max(np.abs(warm.pressure - cold.pressure)) <= 1e-9 * cold.pressure.max()
+    with pytest.raises(InvalidArgumentError, match=r"^warm_start: .*sums to inf"):
+        prob.solve(mean_pressure=0.5, warm_start=np.full(s.shape, 1e306))

@@ -456,6 +456,12 @@ def _api_cases(small: Surface) -> list[tuple[str, str, Any, Any]]:
         "solve.approach": lambda v: solve(small, v, boundary="periodic"),
         "solve.tol": lambda v: solve(small, 0.1 * hs, tol=v),
         "solve.max_iter": lambda v: solve(small, 0.1 * hs, max_iter=v),
+        "solve.memory_limit": lambda v: solve(small, 0.1 * hs, memory_limit=v),
+        "solve.mean_pressure": lambda v: solve(small, mean_pressure=v),
+        "flow.memory_limit": lambda v: leakpath.flow(gap, dx=1.0, memory_limit=v),
+        "flow.max_iter": lambda v: leakpath.flow(gap, dx=1.0, max_iter=v),
+        "flow.viscosity": lambda v: leakpath.flow(gap, dx=1.0, viscosity=v),
+        "flow.tol": lambda v: leakpath.flow(gap, dx=1.0, tol=v),
         "sweep.levels": lambda v: sweep(small, levels=v),
         "sweep.E": lambda v: sweep(small, levels=2, E=v),
         "sweep.nu": lambda v: sweep(small, levels=2, nu=v),
@@ -477,7 +483,8 @@ def _api_cases(small: Surface) -> list[tuple[str, str, Any, Any]]:
         "load.dx": lambda v: load("/nonexistent-never-read.npy", dx=v),
     }
     ints = {"rmd.m", "rmd.seed", "solve.max_iter", "sweep.levels", "percolation.threads",
-            "percolation_threshold.max_solves", "ContactProblem.memory_limit"}
+            "percolation_threshold.max_solves", "ContactProblem.memory_limit",
+            "solve.memory_limit", "flow.memory_limit", "flow.max_iter"}
     shapes = {"spectral.shape", "kernel_table.shape"}
     choices = {"sweep.axis", "percolation.axis", "percolation_threshold.axis",
                "sweep.connectivity", "percolation.connectivity"}
@@ -488,8 +495,9 @@ def _api_cases(small: Surface) -> list[tuple[str, str, Any, Any]]:
         if key in ints:
             bad = NOT_INT + [-1, 0 if "seed" not in key else -5]
             if key in ("solve.max_iter", "percolation.threads", "ContactProblem.memory_limit",
-                       "percolation_threshold.max_solves"):
-                bad = bad + [2**70, "big"]
+                       "percolation_threshold.max_solves", "solve.memory_limit",
+                       "flow.memory_limit", "flow.max_iter"):
+                bad = bad + [2**70, 10**400, "big"]
         elif key in shapes:
             bad = [(2.5, 3), ("3", "3"), (-1, 5), (True, 3), (3, 3, 3), "8", 2.5, None, (0, 4)]
         elif key in choices:
@@ -497,7 +505,7 @@ def _api_cases(small: Surface) -> list[tuple[str, str, Any, Any]]:
         elif key in flags:
             bad = [1, 0, "yes", None, 1.0]
         else:
-            bad = list(NOT_REAL)
+            bad = list(NOT_REAL) + [10**400]
             if arg not in ("approach",):
                 bad += [0, -1.0, -1e-300]
             else:
@@ -512,6 +520,8 @@ def _api_cases(small: Surface) -> list[tuple[str, str, Any, Any]]:
                 bad = [v for v in bad if v is not None]
             if arg == "dx":
                 bad += [1e-200, 1e200]
+            if arg == "mean_pressure":
+                bad += [1e300, 1e-300]  # beyond the solvers' floating-point range
         for v in bad:
             if v is None and arg in ("rms_height", "rms_slope", "long_cutoff", "short_cutoff",
                                       "tol", "max_iter", "atol", "threads", "memory_limit",
@@ -581,6 +591,36 @@ def test_the_probes_of_the_report(small, files):
     refused(lambda: solve(small, 0.1, E=1e-320), "E")
     refused(lambda: load(files["complex"], dx=1.0), "path")
     refused(lambda: Surface(small.heights + 0j, 1.0), "heights")
+    # memory_limit, max_iter and numbers as huge ints or non-numbers, wherever they are taken.
+    state = solve(small, 0.3 * hs)
+    for bad in (-1, 0, float("nan"), float("inf"), "8", 10**400, 1.5):
+        refused(lambda b=bad: state.flow(memory_limit=b), "memory_limit")
+        refused(lambda b=bad: solve(small, 0.1 * hs, memory_limit=b), "memory_limit")
+    refused(lambda: state.flow(max_iter=10**400), "max_iter")
+    refused(lambda: state.flow(viscosity=10**400), "viscosity")
+    refused(lambda: solve(small, 0.1 * hs, max_iter=10**400), "max_iter")
+    # Ragged lists and duck-typed states with strings.
+    refused(lambda: solve([[1, 2], [3]], 0.1, dx=1.0), "heights")
+    refused(lambda: solve(small, 0.1 * hs, warm_start=[[1.0, 2.0], [3.0]]), "warm_start")
+
+    class Duck:
+        gap = [["a", "b"], ["c", "d"]]
+        contact = np.zeros((2, 2), bool)
+        dx = 1.0
+
+    refused(lambda: leakpath.flow(Duck()), "gap")
+    refused(lambda: percolation(Duck()), "gap")
+    duck = Duck()
+    duck.gap, duck.dx = np.ones((2, 2)), "1.0"
+    refused(lambda: leakpath.flow(duck), "dx")
+    refused(lambda: solve(small, 0.1 * hs, warm_start=duck), "warm_start")
+    # An absurd warm start is refused, not reported as non-convergence.
+    refused(lambda: solve(small, 0.1 * hs, warm_start=np.full(small.shape, 1e300)), "warm_start")
+    # Loads far past full contact are solved (not "did not converge"); beyond the
+    # floating-point range of the solvers they are refused by name.
+    assert solve(small, mean_pressure=1e6).contact_fraction == 1.0
+    refused(lambda: solve(small, mean_pressure=1e300), "mean_pressure")
+    refused(lambda: sweep(small, mean_pressures=[1.0, 1e300]), "mean_pressures")
 
 
 # ---------------------------------------------------------------------------- unusable paths
@@ -696,6 +736,9 @@ class TestCLI:
             ("sweep {scattered} --dx 1 --out {d}/o", "point cloud"),
             ("sweep {junk_dat} --dx 1 --out {d}/o", "plain-text"),
             ("sweep {good} --dx 1 --fill mean --levels 0 --out {d}/o", "--levels"),
+            ("flow rmd:m=3,D=2.2,seed=1 --pressure 1e300", "--pressure:"),
+            ("sweep rmd:m=3,D=2.2,seed=1 --mean-pressures 1,1e300 --out {d}/o",
+             "mean_pressures:"),
         ],
     )
     def test_refusals_are_one_line_exit_2(self, files, tmp_path, args, needle):
@@ -703,6 +746,19 @@ class TestCLI:
         proc = run_cli(*args.format(**subst).split(), timeout=60)
         cli_refused(proc, needle)
         assert not (tmp_path / "o" / "table.csv").exists()
+
+    def test_loads_far_past_full_contact_are_solved(self, tmp_path):
+        """p̄ = 1e30 E* (flow) and 1e6 E* (sweep): the whole patch in contact, no flow."""
+        proc = run_cli("flow", "rmd:m=5,D=2.2,seed=1", "--pressure", "1e30", "--json")
+        assert proc.returncode == 0, proc.stderr
+        data = strict_json(proc.stdout)
+        assert data["contact_fraction"] == 1.0 and data["flow_rate"] == 0.0
+        assert data["mean_pressure"] == pytest.approx(1e30, rel=1e-12)
+        proc = run_cli(
+            "sweep", "rmd:m=5,D=2.2,seed=1", "--mean-pressures", "0.1,1e6", "--json",
+            "--out", str(tmp_path / "o"),
+        )
+        assert proc.returncode == 0, proc.stderr
 
     def test_unknown_extension_without_the_extra(self, files, monkeypatch, capsys):
         monkeypatch.setitem(sys.modules, "SurfaceTopography", None)

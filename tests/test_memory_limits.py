@@ -157,6 +157,33 @@ def test_refusal_message_names_the_estimate_and_the_limit() -> None:
     assert "more than the memory limit" in msg and "33 × 33" in msg
 
 
+def _readable(n: int) -> str:
+    """``n`` bytes as the refusal messages must print them: the largest binary unit reached,
+    three significant digits."""
+    for unit, size in (("GiB", 1 << 30), ("MiB", 1 << 20), ("KiB", 1 << 10)):
+        if n >= size:
+            return f"{n / size:.3g} {unit}"
+    return f"{n} bytes"
+
+
+@pytest.mark.parametrize("limit", [10, 1000, 5 << 10])
+def test_small_sizes_are_printed_in_readable_units(limit) -> None:
+    """Not "needs 0.00 GiB … more than 0.00 GiB": bytes, KiB, MiB as the size calls for."""
+    s = leakpath.rmd(5, 2.2, seed=1)
+    for call in (
+        lambda: leakpath.ContactProblem(s, memory_limit=limit),
+        lambda: leakpath.solve(s, 0.1).flow(memory_limit=limit),
+    ):
+        with pytest.raises(ProblemTooLargeError) as info:
+            call()
+        e = info.value
+        msg = str(e)
+        assert e.limit == limit and e.estimate > limit
+        assert "0.00 GiB" not in msg, msg
+        assert f"needs about {_readable(e.estimate)}, more than the memory limit of " \
+            f"{_readable(limit)} " in msg, msg
+
+
 def test_growing_factor_refusal_is_consistent() -> None:
     """The factor's refusal reports the bytes it checked, which exceed the limit."""
     s = leakpath.rmd(6, 2.2, seed=1)

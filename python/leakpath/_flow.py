@@ -130,15 +130,11 @@ class Flow:
 
 
 def _number(name: str, value: Any, *, positive: bool = False) -> float:
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
-        raise InvalidArgumentError(
-            f"{name}: must be a real number, got {value!r}; pass a float", argument=name
-        )
-    v = float(value)
-    if not np.isfinite(v) or (positive and v <= 0):
-        what = "a positive finite number" if positive else "a finite number"
-        raise InvalidArgumentError(f"{name}: must be {what}, got {value!r}", argument=name)
-    return v
+    """A finite real number (``> 0`` with ``positive``); ints beyond the float range, bools
+    and strings are refused naming ``name``."""
+    if positive:
+        return _validate.positive(name, value)
+    return _validate.real(name, value)
 
 
 def _floor_open_gaps(gap: np.ndarray, contact: np.ndarray | None) -> np.ndarray:
@@ -197,7 +193,8 @@ def flow(
         contact: contact mask for a gap array (bool, the gap's shape); default ``gap ≤ 0``.
         tol: relative residual ``‖b − Ax‖₂/‖b‖₂`` (default 1e-12).
         max_iter: conjugate-gradient iterations allowed (default 20000).
-        memory_limit: bytes allowed (default 70 % of physical memory).
+        memory_limit: bytes allowed, a positive integer (default: what this process may
+            still allocate, :func:`leakpath._memory.memory_limit`).
         solver: ``"cholesky"`` (sparse Cholesky, refined with double-double residuals: exact to
             round-off even for the near-threshold gaps where iterations stall),
             ``"multigrid"`` (conjugate gradients, aggregation-multigrid preconditioner, to
@@ -270,15 +267,10 @@ def flow(
     tol_f = _number("tol", tol, positive=True)
     if tol_f >= 1:
         raise InvalidArgumentError(f"tol: must be in (0, 1), got {tol!r}", argument="tol")
-    if max_iter is not None and (
-        isinstance(max_iter, (bool, np.bool_))
-        or not isinstance(max_iter, numbers.Integral)
-        or max_iter < 1
-    ):
-        raise InvalidArgumentError(
-            f"max_iter: must be a positive integer or None, got {max_iter!r}",
-            argument="max_iter",
-        )
+    max_iter = _validate.optional_integer(
+        "max_iter", max_iter, low=1, what="a positive integer or None"
+    )
+    limit = _validate.memory_limit(memory_limit)
 
     boundary = None
     if _is_state(state_or_gap):
@@ -293,7 +285,7 @@ def flow(
                 argument="contact",
             )
         # A solver's gap may dip below 0 by its tolerance (KKT ~1e-11 h_s): clip it.
-        gap_in = np.maximum(np.asarray(state.gap, dtype=np.float64), 0.0)
+        gap_in = np.maximum(_validate.real_array("gap", state.gap, finite=False), 0.0)
         contact, dx = state.contact, state.dx
         boundary = getattr(state, "boundary", None)
     else:
@@ -349,7 +341,8 @@ def flow(
             argument="solver",
         )
     threads = _validate.threads(threads)
-    limit = default_memory_limit() if memory_limit is None else int(memory_limit)
+    if limit is None:
+        limit = default_memory_limit()
     res = _core.solve_reynolds_flow(
         gap,
         dx_f,
@@ -359,7 +352,7 @@ def flow(
         pressure_drop=dp,
         periodic=wrap,
         tol=tol_f,
-        max_iter=None if max_iter is None else int(max_iter),
+        max_iter=max_iter,
         memory_limit=limit,
         solver=solver,
         threads=None if threads is None else int(threads),

@@ -419,6 +419,8 @@ def sweep(
         )
     if mean_pressures is not None:
         pressure_list = _resolve_mean_pressures(mean_pressures)
+        for v in (pressure_list[0], pressure_list[-1]):  # refused up front, not mid-sweep
+            _validate.load_scales(v, problem.e_star, surface.dx, name="mean_pressures")
         level_list = [("mean_pressure", v) for v in pressure_list]
         approach_list = None
     else:

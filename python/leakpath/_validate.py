@@ -42,6 +42,7 @@ __all__ = [
     "flag",
     "format_bytes",
     "integer",
+    "load_scales",
     "memory_budget",
     "memory_limit",
     "optional_integer",
@@ -372,6 +373,38 @@ def contact_scales(e_star: float, dx: float, height_range: float, name: str = "E
                 f"{name}: with E* = {e_star:.3g}, dx = {dx:.3g} and h_s = {height_range:.3g} "
                 f"the {what} is about 1e{exponent:+.0f}, beyond 1e±{SCALE_EXPONENT} where the "
                 "solvers keep their precision; express E (pressures) or the lengths in units "
+                "closer to the problem's scale",
+                argument=name,
+            )
+
+
+def load_scales(
+    mean_pressure: float, e_star: float, dx: float, name: str = "mean_pressure"
+) -> None:
+    """Refuse an imposed mean pressure ``p̄`` whose solver arithmetic would leave the
+    floating-point range.
+
+    Load control works with pressures ``≈ p̄`` [pressure], their squares and energies
+    ``p̄²·C_00`` and the displacement ``p̄·C_00`` [length] that ``p̄`` makes at its own cell
+    (``C_00 ≈ 1.12 dx/E*``); each must lie within ``10^±``:data:`SCALE_EXPONENT`, as in
+    :func:`contact_scales`. Any ``p̄`` inside is solved, however far past full contact
+    (``p̄ ≫ E*`` is outside small-strain elasticity, but the linear model is still solved
+    exactly).
+    """
+    log_p = math.log10(mean_pressure)
+    log_c = math.log10(dx) - math.log10(e_star)
+    terms = [
+        ("mean pressure", log_p),
+        ("squared pressure scale p̄²", 2.0 * log_p),
+        ("displacement scale p̄·dx/E*", log_p + log_c),
+        ("energy scale p̄²·dx/E*", 2.0 * log_p + log_c),
+    ]
+    for what, exponent in terms:
+        if abs(exponent) > SCALE_EXPONENT:
+            raise InvalidArgumentError(
+                f"{name}: p̄ = {mean_pressure:.3g} with E* = {e_star:.3g} and dx = {dx:.3g} "
+                f"makes the {what} about 1e{exponent:+.0f}, beyond 1e±{SCALE_EXPONENT} where "
+                "the solvers keep their precision; express pressures (p̄ and E) in a unit "
                 "closer to the problem's scale",
                 argument=name,
             )

@@ -211,6 +211,11 @@ class ContactState:
         return flow(self, **kw)
 
 
+def _describe_start(value: Any) -> str:
+    """A short description of a rejected ``warm_start``: its type and value."""
+    return f"{type(value).__name__} {_validate.describe(value, 40)}"
+
+
 def _as_surface(surface: Surface | np.ndarray, dx: float | None) -> Surface:
     if isinstance(surface, Surface):
         if dx is not None and _validate.spacing("dx", dx) != surface.dx:
@@ -297,7 +302,9 @@ class ContactProblem:
         output, the state's ``approach``).
 
         ``solver`` (every one returns the same unique minimiser, checked by the KKT
-        certificate ``kkt ≤ tol``, default :data:`DEFAULT_TOL` relative to ``h_s``):
+        certificate ``kkt ≤ tol``, default :data:`DEFAULT_TOL` relative to ``h_s``, or past
+        the height range to ``max(h_s, Δ)`` and under a mean pressure to ``max(h_s, |Δ|,
+        p̄·C_00)``, where round-off is relative to them; ``docs/conventions.md``):
 
         * ``"auto"`` (default): Polonsky–Keer, matrix-free and preconditioned, on grids of more
           than :data:`AUTO_ACTIVE_SET_MAX_POINTS` points; the exact block active set on smaller
@@ -312,7 +319,10 @@ class ContactProblem:
         this problem's previous solve; a :class:`ContactState` from that state (Polonsky–Keer
         starts from its pressure, the exact solvers from its contact set); a float pressure
         field of the surface's shape likewise; a boolean contact mask (exact solvers: from
-        that set; Polonsky–Keer: cold).
+        that set; Polonsky–Keer: cold). A pressure field must be finite and ``≥ 0``; under an
+        imposed approach at most :attr:`WARM_START_MARGIN` times the largest pressure a
+        solution can have (:meth:`_pressure_bound`); under a mean pressure it is rescaled to
+        the load. Anything else is refused naming ``warm_start``.
 
         ``threads``: threads of the solve (default ``None``: all cores, or
         ``RAYON_NUM_THREADS``); the result does not depend on it.
@@ -327,38 +337,115 @@ class ContactProblem:
                 "mean_pressure= (load control)",
                 argument="approach",
             )
-        self._check_warm_start(warm_start)
         if mean_pressure is not None:
             pbar = _validate.positive("mean_pressure", mean_pressure)
+            _validate.load_scales(pbar, self.e_star, self.surface.dx)
             if solver in ("active-set", "lawson-hanson"):
                 raise InvalidArgumentError(
                     f"solver: {solver!r} imposes the approach only; use solver='auto' or "
                     "'polonsky-keer' with mean_pressure=",
                     argument="solver",
                 )
-            return self._solve(None, pbar, solver, warm_start, tol, max_iter, threads)
+            start = self._check_warm_start(warm_start, None, pbar)
+            return self._solve(None, pbar, solver, start, tol, max_iter, threads)
         a = self._check_approach(approach)
-        return self._solve(a, None, solver, warm_start, tol, max_iter, threads)
+        start = self._check_warm_start(warm_start, a, None)
+        return self._solve(a, None, solver, start, tol, max_iter, threads)
 
-    def _check_warm_start(self, warm_start: Any) -> None:
-        if warm_start is None or isinstance(warm_start, (bool, np.bool_, ContactState)):
-            if isinstance(warm_start, ContactState) and warm_start.shape != self._h.shape:
-                raise InvalidArgumentError(
-                    f"warm_start: a state of shape {warm_start.shape}, the surface is "
-                    f"{self._h.shape}; pass a state of this surface",
-                    argument="warm_start",
-                )
-            return
-        arr = np.asarray(warm_start)
-        ok = arr.shape == self._h.shape and (
-            arr.dtype == bool or (arr.dtype.kind == "f" and bool(np.all(np.isfinite(arr))))
+    #: A pressure start whose largest value exceeds this multiple of the largest pressure a
+    #: solution can have (:meth:`_pressure_bound`) is refused: it says nothing about the
+    #: solution, and from 1e300 the first product ``C p`` overflows.
+    WARM_START_MARGIN = 1e6
+
+    def _pressure_bound(self, approach: float) -> float:
+        """``max(h_s, Δ) / C_00`` [pressure]: the largest pressure of any solution at
+        approach ``Δ`` (free boundary: at a contact point ``C_00 p_i ≤ (C p)_i = Δ − (max h −
+        h_i) ≤ Δ``, every ``C_ij > 0``; periodic: the same order), with ``C_00 = 4 dx
+        ln(1 + √2)/(π E*)`` the displacement of a unit pressure at its own cell."""
+        c00 = 4.0 * self.surface.dx * math.log1p(math.sqrt(2.0)) / (math.pi * self.e_star)
+        return max(self.h_range, approach) / c00
+
+    def _check_warm_start(
+        self, warm_start: Any, approach: float | None, mean_pressure: float | None
+    ) -> Any:
+        """``warm_start`` in the form :meth:`_start` takes (``None``, a bool, a boolean mask or
+        a float pressure field), or :class:`~leakpath.errors.InvalidArgumentError` naming it.
+
+        A pressure field (given, or a state's) must have the surface's shape and be finite
+        and ``≥ 0``. Displacement control: its largest value must not exceed
+        :attr:`WARM_START_MARGIN` times :meth:`_pressure_bound`. Load control rescales it to
+        the load ``p̄ N``, so only that rescaling must stay finite.
+        """
+        shape = self._h.shape
+        if warm_start is None or isinstance(warm_start, (bool, np.bool_)):
+            return None if warm_start is None else bool(warm_start)
+        what = (
+            f"True/False, a ContactState of this surface, a boolean contact mask or a float "
+            f"pressure field (≥ 0) of shape {shape}"
         )
-        if not ok:
+        if isinstance(warm_start, ContactState):
+            value, source = warm_start.pressure, "the state's pressure"
+        else:
+            value, source = warm_start, "the pressure field"
+        try:
+            arr = np.asarray(value)
+        except (TypeError, ValueError):  # ragged nested lists
+            arr = None
+        if arr is None or (arr.dtype.kind not in "bfiu"):
             raise InvalidArgumentError(
-                "warm_start: expected True/False, a ContactState, a boolean contact mask or a "
-                f"finite float pressure field of shape {self._h.shape}",
+                f"warm_start: expected {what}; got {_describe_start(warm_start)}",
                 argument="warm_start",
             )
+        if arr.shape != shape:
+            raise InvalidArgumentError(
+                f"warm_start: {source} has shape {arr.shape}, the surface is {shape}; pass a "
+                "start of this surface",
+                argument="warm_start",
+            )
+        if arr.dtype.kind == "b":
+            if isinstance(warm_start, ContactState):
+                raise InvalidArgumentError(
+                    f"warm_start: the state's pressure is boolean; expected {what}",
+                    argument="warm_start",
+                )
+            return np.ascontiguousarray(arr)
+        p = np.ascontiguousarray(arr, dtype=np.float64)
+        if not np.isfinite(p).all():
+            raise InvalidArgumentError(
+                f"warm_start: {source} contains NaN or infinite values; pass a finite start "
+                "or None",
+                argument="warm_start",
+            )
+        p_min, p_max = float(p.min()), float(p.max())
+        if p_min < 0:
+            raise InvalidArgumentError(
+                f"warm_start: {source} has negative values (min {p_min:.3g}); contact "
+                "pressures are ≥ 0: clip it (np.maximum(p, 0)) or pass None",
+                argument="warm_start",
+            )
+        if mean_pressure is not None:
+            with np.errstate(over="ignore", divide="ignore"):
+                total = float(np.sum(p))
+                factor = mean_pressure * p.size / total if total > 0 else 1.0
+            if not (math.isfinite(total) and math.isfinite(factor) and factor > 0):
+                raise InvalidArgumentError(
+                    f"warm_start: {source} sums to {total:.3g}, which cannot be rescaled to "
+                    f"the load p̄·N = {mean_pressure * p.size:.3g}; pass a start of the "
+                    "order of the mean pressure, or None",
+                    argument="warm_start",
+                )
+        elif approach is not None:
+            bound = self._pressure_bound(approach)
+            if p_max > self.WARM_START_MARGIN * bound:
+                raise InvalidArgumentError(
+                    f"warm_start: {source} reaches {p_max:.3g}, more than "
+                    f"{self.WARM_START_MARGIN:g} times the largest pressure a solution at "
+                    f"approach {approach:.6g} can have (max(h_s, Δ)/C_00 = {bound:.3g}, "
+                    "C_00 = 4 dx ln(1+√2)/(π E*)); pass a start of this problem (e.g. a "
+                    "previous state of it) or None",
+                    argument="warm_start",
+                )
+        return p
 
     def _start(self, warm_start: Any) -> dict[str, Any]:
         """The core's start: Polonsky–Keer starts from a pressure field, the exact solvers

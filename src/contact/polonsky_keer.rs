@@ -151,10 +151,12 @@
 //! ```
 //!
 //! (the last term is dropped when `Σ p = 0`; the scale is `max(h_s, Δ)` in displacement
-//! control, which differs from `h_s` only past the height range). The solver stops when `kkt ≤ tol`, default
-//! [`DEFAULT_TOL`] `= 1e-12`: reachable in double precision (round-off of `u` is
-//! `~1e-15 · max |u|`) at a few CG iterations per decade. For a flat surface (`h_s = 0`) the
-//! scale is `Δ` (displacement control) or `p̄ · C_00` (load control), `C_00 = 4 dx ln(1+√2)/(π E*)`.
+//! control and `max(h_s, |Δ|, p̄ · C_00)` in load control, with the current `Δ`,
+//! `C_00 = 4 dx ln(1+√2)/(π E*)`; they differ from `h_s` only past the height range, where
+//! `u` and `Δ` are many `h_s` and round-off is relative to them). The solver stops when
+//! `kkt ≤ tol`, default [`DEFAULT_TOL`] `= 1e-12`: reachable in double precision (round-off
+//! of `u` is `~1e-15 · max |u|`) at a few CG iterations per decade. For a flat surface
+//! (`h_s = 0`) the scale is `Δ` (displacement control) or `p̄ · C_00` (load control).
 //!
 //! # Determinism
 //!
@@ -1396,18 +1398,25 @@ fn run(
         }
         Control::MeanPressure(m) => Mode::Load(m * n as f64),
     };
-    let scale = if hs > 0.0 {
-        // A free patch pressed far past its height range: gaps and displacements are of the
-        // order of Δ, so round-off is relative to Δ, not h_s.
+    // The certificate's scale. A patch pressed far past its height range has gaps and
+    // displacements of the order of Δ (or, in load control, of the displacement `p̄·C_00` that
+    // the mean pressure makes at its own cell), so round-off is relative to those, not h_s:
+    // at p̄ = 10⁴ E* on a 33² free patch Δ ≈ 10³ h_s, and a certificate relative to h_s
+    // cannot go below ~1e-12. In load control Δ is an output, so the scale follows the
+    // current Δ.
+    let scale_at = |delta: f64| -> f64 {
         match control {
-            Control::Approach(d) => hs.max(d),
-            Control::MeanPressure(_) => hs,
-        }
-    } else {
-        match control {
+            Control::Approach(d) if hs > 0.0 => hs.max(d),
             Control::Approach(d) if d > 0.0 => d,
             Control::Approach(_) => 1.0,
-            Control::MeanPressure(m) => m * c00,
+            Control::MeanPressure(m) => {
+                let s = hs.max(m * c00);
+                if delta.is_finite() {
+                    s.max(delta.abs())
+                } else {
+                    s
+                }
+            }
         }
     };
     let max_iter = opts.max_iter.unwrap_or_else(|| default_max_iter(n));
@@ -1492,7 +1501,7 @@ fn run(
     let mut chord_steps = 0usize;
     let (mut tau_pre, mut tau_plain) = (f64::NAN, f64::NAN);
     loop {
-        let cert = state.certificate() / scale;
+        let cert = state.certificate() / scale_at(delta);
         if w.pre.is_some() && cert > SAFEGUARD * best_cert {
             // The preconditioned iteration is not contracting: finish with plain steps.
             w.pre = None;
@@ -1711,7 +1720,7 @@ fn run(
         }
     }
 
-    let kkt = state.certificate() / scale;
+    let kkt = state.certificate() / scale_at(delta);
     let sum_p = state.sum_p;
     let applies = w.applies;
     let pre_applies = w.pre_applies;
@@ -2110,7 +2119,13 @@ mod tests {
                 let s = solve(&pr, control, &opts(tol)).unwrap();
                 assert!(s.kkt <= tol, "{boundary:?} {control:?}: {}", s.kkt);
                 let (hmax, hmin, _) = height_stats(&h);
-                let again = kkt_certificate(&s.pressure, &s.gap, hmax - hmin);
+                // The documented scale: max(h_s, Δ), or max(h_s, |Δ|, p̄·C_00) under a load.
+                let c00 = love_displacement(0.0, 0.0, pr.dx, pr.e_star);
+                let scale = match control {
+                    Control::Approach(d) => (hmax - hmin).max(d),
+                    Control::MeanPressure(m) => (hmax - hmin).max(s.approach.abs()).max(m * c00),
+                };
+                let again = kkt_certificate(&s.pressure, &s.gap, scale);
                 assert_eq!(again, s.kkt);
                 assert!(s.pressure.iter().all(|&v| v >= 0.0));
                 assert_eq!(

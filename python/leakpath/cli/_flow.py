@@ -16,7 +16,7 @@ from ._common import (
 def _cmd_flow(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from .. import _core
+    from .. import _core, _validate
     from .._flow import flow
     from ..contact import contact_modulus, default_memory_limit, solve
 
@@ -32,6 +32,7 @@ def _cmd_flow(args: argparse.Namespace) -> int:
     else:
         if not (math.isfinite(args.pressure) and args.pressure > 0):
             raise UsageError(f"--pressure must be a positive number, got {args.pressure!r}")
+        _validate.load_scales(args.pressure, e_star, surface.dx, name="--pressure")
         out = _core.solve_polonsky_keer(
             np.ascontiguousarray(surface.heights, dtype=np.float64),
             surface.dx,
