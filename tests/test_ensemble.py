@@ -475,6 +475,7 @@ USER_FILES = {
     "tasks/README.txt": "what these tasks are",
     f"tasks/{OLD_KEY}/seed-7.csv": "named like a task table, without its checksummed JSON",
     "notes.txt": "keep me",
+    ".notes.tmp": "hidden, but not named like a temporary of leakpath's atomic writes",
 }
 RECORD = ".leakpath-outputs.json"
 

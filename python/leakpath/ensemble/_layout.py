@@ -8,6 +8,7 @@ import hashlib
 import io
 import json
 import os
+import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -18,7 +19,6 @@ import numpy as np
 from .._checkpoint import _record_digest
 from .._io import atomic_write_text, csv_quote, csv_text
 from .._io import dumps as _dumps
-from .._outputs import is_temporary
 from ..errors import InvalidArgumentError
 from ._params import ParamSet, _format_value, _generator_name, _natural_order, param_key
 
@@ -38,6 +38,9 @@ QUANTITIES: tuple[str, ...] = (
     "alpha_star",
 )
 _FORMAT = 1
+#: Temporaries of atomic writes, ``.<name>.<pid>.<hex token>.tmp`` (any token length, as the
+#: figure writer's clean-up accepts); a user's ``.notes.tmp`` does not match.
+_TEMPORARY = re.compile(r"^\..+\.\d+\.[0-9a-f]+\.tmp$")
 
 
 @dataclass(frozen=True)
@@ -225,7 +228,7 @@ def _clean_stale_temporaries(out: Path) -> None:
     patterns = ("tasks/*/.*.tmp", "figures/.*.tmp", ".*.tmp")
     for pattern in patterns:
         for stale in out.glob(pattern):
-            if not is_temporary(stale) or not stale.is_file():
+            if not _TEMPORARY.match(stale.name) or not stale.is_file():
                 continue
             try:
                 stale.unlink()
