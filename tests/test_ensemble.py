@@ -15,6 +15,7 @@ import signal
 import subprocess
 import sys
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -24,6 +25,7 @@ import leakpath
 from leakpath import cli
 from leakpath.ensemble import (
     QUANTITIES,
+    OverwriteNote,
     aggregate,
     ensemble,
     param_key,
@@ -458,6 +460,136 @@ class TestResume:
         fresh = run_ensemble(copy, overwrite=True, workers=2)  # overwrite redoes everything
         assert fresh.run["tasks_run"] == 8
         assert fresh.aggregate_path.read_bytes() == reference.aggregate_path.read_bytes()
+
+
+# ---------------------------------------------------------------------------- overwrite
+#: An earlier, different ensemble (other D, m and levels): none of its task files is one the
+#: runs under test write, so each must be deleted by --overwrite, not merely rewritten.
+OLD_PARAMS = {"D": [2.4], "m": [3]}
+OLD_KEY = "D=2.4_m=3"
+OLD_CLI = ["--D", "2.4", "--m", "3", "--surfaces", "2", "--levels", "3"]
+#: Files of the user's kept in the ensemble directory, some named like leakpath's.
+USER_FILES = {
+    "figures/my_notes.pdf": "my own figure",
+    "figures/fig2_vpg_volume_gap_draft.png": "named like a figure of the run",
+    "tasks/README.txt": "what these tasks are",
+    f"tasks/{OLD_KEY}/seed-7.csv": "named like a task table, without its checksummed JSON",
+    "notes.txt": "keep me",
+    ".notes.tmp": "hidden, but not named like a temporary of leakpath's atomic writes",
+}
+RECORD = ".leakpath-outputs.json"
+
+
+def files_in(directory: Path) -> set[str]:
+    """Every file below ``directory``, relative, in POSIX form."""
+    return {p.relative_to(directory).as_posix() for p in directory.rglob("*") if p.is_file()}
+
+
+def add_user_files(out: Path) -> None:
+    for rel, text in USER_FILES.items():
+        (out / rel).parent.mkdir(parents=True, exist_ok=True)
+        (out / rel).write_text(text)
+
+
+def assert_user_files_intact(out: Path) -> None:
+    for rel, text in USER_FILES.items():
+        assert (out / rel).read_text() == text, rel
+
+
+def run_old_ensemble(out: Path, figures: bool = False) -> set[str]:
+    """The earlier ensemble in ``out``; returns its files."""
+    ensemble(params=OLD_PARAMS, surfaces=2, levels=3, out=out, executor="serial",
+             progress=False, figures=figures)
+    return files_in(out)
+
+
+class TestOverwrite:
+    @staticmethod
+    def fresh_files(reference) -> set[str]:
+        """What a run without figures writes into an empty directory: the reference run's
+        files (a fresh run into an empty directory) apart from its figures."""
+        return {f for f in files_in(reference.directory) if not f.startswith("figures/")}
+
+    def test_api_keeps_users_files_and_removes_the_earlier_runs(self, reference, tmp_path):
+        out = tmp_path / "run"
+        first = run_old_ensemble(out, figures=True)
+        assert {"figures/thresholds_hist.png", f"tasks/{OLD_KEY}/seed-1.json"} <= first
+        add_user_files(out)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            result = run_ensemble(out, overwrite=True, workers=2)
+        assert not [w for w in caught if issubclass(w.category, OverwriteNote)]
+        assert_user_files_intact(out)
+        # The earlier run's files are gone (its figures, its task files), nothing else is
+        # left but the user's; the results equal those of a fresh, uninterrupted run.
+        assert files_in(out) == self.fresh_files(reference) | set(USER_FILES)
+        assert result.run["tasks_run"] == 2 * SURFACES
+        assert result.aggregate_path.read_bytes() == reference.aggregate_path.read_bytes()
+        assert result.thresholds_path.read_bytes() == reference.thresholds_path.read_bytes()
+        # The record lists every file this run wrote and nothing of the user's.
+        record = json.loads((out / RECORD).read_text())
+        assert set(record["files"]) == files_in(out) - set(USER_FILES) - {RECORD}
+
+    def test_cli_keeps_users_files_and_removes_the_earlier_runs(
+        self, reference, tmp_path, capsys
+    ):
+        out = tmp_path / "run"
+        old = ["ensemble", *OLD_CLI, "--out", str(out), "--workers", "1", "--no-figures"]
+        assert cli.main(old) == 0
+        assert f"tasks/{OLD_KEY}/seed-0.csv" in files_in(out)
+        add_user_files(out)
+        capsys.readouterr()
+        new = ["ensemble", *CLI_ARGS, "--out", str(out), "--workers", "2", "--no-figures"]
+        assert cli.main([*new, "--overwrite"]) == 0
+        err = capsys.readouterr().err
+        assert "note" not in err and "warning" not in err
+        assert_user_files_intact(out)
+        assert files_in(out) == self.fresh_files(reference) | set(USER_FILES)
+        assert (out / "aggregate.csv").read_bytes() == reference.aggregate_path.read_bytes()
+        # A second --overwrite replaces this run in turn, still keeping the user's files.
+        assert cli.main([*new, "--overwrite"]) == 0
+        assert_user_files_intact(out)
+        assert files_in(out) == self.fresh_files(reference) | set(USER_FILES)
+
+    def test_a_recorded_file_the_user_edited_is_kept_with_a_note(
+        self, reference, tmp_path, capsys
+    ):
+        out = tmp_path / "run"
+        run_old_ensemble(out)
+        edited = f"tasks/{OLD_KEY}/seed-1.csv"
+        with open(out / edited, "a", encoding="utf-8") as fh:  # no longer the run's table
+            fh.write("my extra row\n")
+        # Only touched, the same bytes: still recognised as leakpath's by its checksum.
+        touched = out / "tasks" / OLD_KEY / "seed-0.json"
+        os.utime(touched, ns=(touched.stat().st_atime_ns, touched.stat().st_mtime_ns + 10**9))
+        argv = ["ensemble", *CLI_ARGS, "--out", str(out), "--workers", "2", "--no-figures"]
+        assert cli.main([*argv, "--overwrite"]) == 0
+        notes = [line for line in capsys.readouterr().err.splitlines() if "note" in line]
+        assert len(notes) == 1
+        assert notes[0].startswith("leakpath: note: --overwrite: kept 1 file(s)")
+        assert edited in notes[0] and "changed" in notes[0]
+        assert (out / edited).read_text(encoding="utf-8").endswith("my extra row\n")
+        assert files_in(out) == self.fresh_files(reference) | {edited}
+        assert (out / "aggregate.csv").read_bytes() == reference.aggregate_path.read_bytes()
+
+    def test_without_a_record_only_checksummed_task_files_are_removed(
+        self, reference, tmp_path
+    ):
+        # A directory from a leakpath that kept no record: only task files, recognised by
+        # their checksums, are known to be leakpath's.
+        out = tmp_path / "run"
+        first = run_old_ensemble(out, figures=True)
+        (out / RECORD).unlink()
+        add_user_files(out)
+        with pytest.warns(OverwriteNote, match="no record") as notes:
+            result = run_ensemble(out, overwrite=True, workers=2)
+        assert "task files" in str(notes[0].message)
+        assert_user_files_intact(out)
+        old_tasks = {f for f in first if f.startswith("tasks/")}
+        assert len(old_tasks) == 4
+        stays = first - old_tasks - {RECORD}  # its figures, rewritten tables, manifest
+        assert files_in(out) == self.fresh_files(reference) | stays | set(USER_FILES)
+        assert result.aggregate_path.read_bytes() == reference.aggregate_path.read_bytes()
 
 
 # ---------------------------------------------------------------------------- API / CLI

@@ -21,7 +21,7 @@ from typing import Any
 
 from ._io import atomic_write_text, dumps
 
-__all__ = ["RECORD_NAME", "OutputRecord", "is_temporary"]
+__all__ = ["RECORD_NAME", "OutputRecord", "OverwriteNote", "is_temporary", "prune_empty_dirs"]
 
 #: The record's file name in the output directory.
 RECORD_NAME = ".leakpath-outputs.json"
@@ -34,6 +34,10 @@ _TEMPORARY = re.compile(r"^\..+\.\d+\.[0-9a-f]{12}\.tmp$")
 def is_temporary(path: Path) -> bool:
     """Whether ``path`` is named like a temporary of leakpath's atomic writes."""
     return bool(_TEMPORARY.match(path.name))
+
+
+class OverwriteNote(UserWarning):
+    """What an overwrite left in place (a changed file, a directory without a record)."""
 
 
 def _stamp(path: Path) -> dict[str, int] | None:
@@ -53,6 +57,8 @@ class OutputRecord:
     def __init__(self, directory: Path) -> None:
         self.dir = directory
         self.files: dict[str, dict[str, int]] = {}
+        #: The files the last :meth:`remove_unchanged` deleted.
+        self.removed: list[Path] = []
 
     @property
     def path(self) -> Path:
@@ -90,8 +96,9 @@ class OutputRecord:
             return None
         return path
 
-    def add(self, paths: Iterable[Path]) -> None:
-        """Record ``paths`` (files just written inside the directory) and save the record."""
+    def add(self, paths: Iterable[Path], *, save: bool = True) -> None:
+        """Record ``paths`` (files just written inside the directory) and save the record
+        (``save=False`` defers that to a later :meth:`save`, for runs writing many files)."""
         root = self.dir.resolve()
         for p in paths:
             try:
@@ -101,7 +108,8 @@ class OutputRecord:
             stamp = _stamp(Path(p))
             if stamp is not None:
                 self.files[rel] = stamp
-        self.save()
+        if save:
+            self.save()
 
     def save(self) -> None:
         body: dict[str, Any] = {
@@ -115,6 +123,7 @@ class OutputRecord:
         """Delete the recorded files still as the run left them, and the record; return the
         recorded files kept because they changed since (or are no longer plain files)."""
         kept: list[str] = []
+        self.removed = []
         for rel, stamp in sorted(self.files.items()):
             path = self._inside(rel)
             now = None if path is None else _stamp(path)
@@ -126,9 +135,29 @@ class OutputRecord:
                 kept.append(rel)
                 continue
             path.unlink()
+            self.removed.append(path)
         self.files.clear()
         try:
             self.path.unlink()
         except FileNotFoundError:
             pass
         return kept
+
+
+def prune_empty_dirs(root: Path, removed: Iterable[Path]) -> None:
+    """Remove the directories below ``root`` left empty by deleting ``removed``: the ones
+    that held those files and their parents up to (not including) ``root``."""
+    top = root.resolve()
+    for path in sorted({Path(p).parent for p in removed}, key=lambda p: -len(p.parts)):
+        while True:
+            try:
+                inside = path.resolve().is_relative_to(top) and path.resolve() != top
+            except OSError:
+                break
+            if not inside or path.is_symlink():
+                break
+            try:
+                path.rmdir()  # only succeeds when empty
+            except OSError:
+                break
+            path = path.parent

@@ -87,13 +87,17 @@ def _as_flags(message: str) -> str:
 
 
 def _print_warnings(caught: list[warnings.WarningMessage]) -> None:
-    """Warnings of the run (tasks recomputed after failing their checks), one line each."""
+    """Warnings of the run (tasks recomputed after failing their checks) and notes of
+    ``--overwrite`` (files it kept), one line each."""
+    from .._outputs import OverwriteNote
+
     for w in caught:
-        print(f"{PROG}: warning: {_one_line(_as_flags(str(w.message)))}", file=sys.stderr)
+        kind = "note" if issubclass(w.category, OverwriteNote) else "warning"
+        print(f"{PROG}: {kind}: {_one_line(_as_flags(str(w.message)))}", file=sys.stderr)
 
 
 def _cmd_ensemble(args: argparse.Namespace) -> int:
-    from ..ensemble import ensemble
+    from ..ensemble import OverwriteNote, ensemble
 
     if args.workers is not None and args.scheduler:
         raise UsageError("--workers sizes local processes; with --scheduler size the cluster")
@@ -103,6 +107,7 @@ def _cmd_ensemble(args: argparse.Namespace) -> int:
     try:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", RuntimeWarning)
+            warnings.simplefilter("always", OverwriteNote)
             result = ensemble(
                 generator="rmd",
                 params={"D": args.D, "m": args.m},
@@ -205,7 +210,9 @@ def _add_ensemble_parser(subparsers: Any) -> None:
     p.add_argument(
         "--overwrite",
         action="store_true",
-        help="delete a previous ensemble's files in --out first",
+        help="replace a previous ensemble in --out: delete the files its run wrote "
+        "(as recorded in OUT/.leakpath-outputs.json) and its checksummed task files; "
+        "files of your own stay",
     )
     p.add_argument("--no-figures", action="store_true", help="do not write OUT/figures")
     p.add_argument("--json", action="store_true", help="print ensemble.json instead of a table")

@@ -13,6 +13,7 @@ processes, Dask), ``_run`` (:func:`ensemble`). The figures live in
 :mod:`leakpath.plotting.ensemble`.
 """
 
+from .._outputs import OverwriteNote
 from ._aggregate import (
     STATS,
     THRESHOLD_COLUMNS,
@@ -35,6 +36,7 @@ __all__ = [
     "ensemble",
     "aggregate",
     "EnsembleResult",
+    "OverwriteNote",
     "ParamSet",
     "QUANTITIES",
     "STATS",

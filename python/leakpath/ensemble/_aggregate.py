@@ -17,6 +17,7 @@ import numpy as np
 from .._core import __version__
 from .._io import atomic_write_text, machine_info
 from .._io import dumps as _dumps
+from .._outputs import OutputRecord
 from ._layout import (
     _FORMAT,
     QUANTITIES,
@@ -214,7 +215,11 @@ class EnsembleResult:
         :func:`save_ensemble_figures`."""
         from ..plotting.ensemble import save_ensemble_figures
 
-        return save_ensemble_figures(self, outdir, formats=formats)
+        paths = save_ensemble_figures(self, outdir, formats=formats)
+        record = _existing_record(self.directory)
+        if record is not None:  # files outside the directory are not added
+            record.add(paths)
+        return paths
 
 
 # ============================================================================ aggregation
@@ -258,13 +263,25 @@ def _aggregate_set(
     return rows
 
 
+def _existing_record(directory: Path) -> OutputRecord | None:
+    """The record of ``directory`` when a run left one (files written later are added to
+    it); ``None`` for a directory without one, where a partial record would mislead."""
+    record = OutputRecord(directory)
+    return record if record.read() else None
+
+
 def aggregate(
-    out: PathLike, *, figures: bool = True, run: Mapping[str, Any] | None = None
+    out: PathLike,
+    *,
+    figures: bool = True,
+    run: Mapping[str, Any] | None = None,
+    _record: OutputRecord | None = None,
 ) -> EnsembleResult:
     """Aggregate the finished ensemble in ``out`` (every task of its manifest must exist).
 
     Writes ``aggregate.csv``, ``thresholds.csv`` and ``ensemble.json`` atomically (and the
-    figures with ``figures=True``) and returns the :class:`EnsembleResult`. The output depends
+    figures with ``figures=True``), adds them to the directory's record of written files
+    (when it has one) and returns the :class:`EnsembleResult`. The output depends
     only on the per-surface CSVs and the manifest: tables are read in the order of the
     parameter sets (natural order of their values) and seeds (ascending).
 
@@ -275,6 +292,8 @@ def aggregate(
     """
     directory = Path(out)
     manifest = _read_manifest(directory)
+    record = _record if _record is not None else _existing_record(directory)
+    written: list[Path] = []
     identity = dict(manifest["identity"])
     axis = identity.get("axis")  # an edited identity fails every task's run check below
     run_id = _run_id(identity)
@@ -327,10 +346,16 @@ def aggregate(
         f"{q}_{s}" for q in QUANTITIES for s in STATS
     ]
     thr_columns = ["param_key", *param_names, *THRESHOLD_COLUMNS]
-    atomic_write_text(directory / "aggregate.csv", _csv(agg_rows, agg_columns))
-    atomic_write_text(directory / "thresholds.csv", _csv(thr_rows, thr_columns))
+    written.append(atomic_write_text(directory / "aggregate.csv", _csv(agg_rows, agg_columns)))
+    written.append(atomic_write_text(directory / "thresholds.csv", _csv(thr_rows, thr_columns)))
 
     leak_summary = write_leak_statistics(directory, leak_sets, param_names, axis, figures)
+    if leak_summary:
+        files = leak_summary["files"]
+        names = [files["bands"], files["thresholds"], *files.get("figures", [])]
+        written += [directory / name for name in names]
+    if record is not None:
+        record.add(written)
 
     result = EnsembleResult(
         directory=directory,
@@ -345,6 +370,8 @@ def aggregate(
         from ..plotting.ensemble import save_ensemble_figures
 
         result = replace(result, figures=save_ensemble_figures(result))
+        if record is not None:
+            record.add(result.figures)
     doc = {
         "format": _FORMAT,
         "kind": "leakpath-ensemble-summary",
@@ -378,7 +405,9 @@ def aggregate(
         },
         "machine": machine_info(),
     }
-    atomic_write_text(directory / "ensemble.json", _dumps(doc))
+    summary_path = atomic_write_text(directory / "ensemble.json", _dumps(doc))
+    if record is not None:
+        record.add([summary_path])
     return result
 
 

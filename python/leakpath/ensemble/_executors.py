@@ -15,6 +15,7 @@ from multiprocessing.connection import wait as _wait_ready
 from pathlib import Path
 from typing import Any
 
+from .._outputs import OutputRecord
 from .._sweep import sweep as _sweep
 from ._aggregate import threshold_from_rows
 from ._layout import _FORMAT, _TaskOutput, _TaskSpec, _write_task
@@ -245,9 +246,12 @@ class _Driver:
         done_before: int,
         progress: bool,
         stop_after: int | None = None,
+        record: OutputRecord | None = None,
     ):
         self.out = out
         self.run_id = run_id
+        self.record = record
+        self._unsaved = 0
         self.written: list[tuple[str, int]] = []
         self.failed: list[tuple[str, int, str]] = []
         self.compute_seconds = 0.0
@@ -267,7 +271,16 @@ class _Driver:
             )
 
     def done(self, result: _TaskOutput) -> None:
-        _write_task(self.out, result, self.run_id)
+        paths = _write_task(self.out, result, self.run_id)
+        if self.record is not None:
+            # Saving the whole record after every task would cost quadratic time over
+            # thousands of tasks; save it in growing batches instead. Task files a killed
+            # driver did not record are still recognised by their checksums.
+            self.record.add(paths, save=False)
+            self._unsaved += 1
+            if self._unsaved >= max(8, len(self.record.files) // 8):
+                self.record.save()
+                self._unsaved = 0
         self.written.append((result.key, result.seed))
         self.compute_seconds += result.seconds
         if self.bar is not None:
@@ -285,6 +298,9 @@ class _Driver:
             self.bar.update(1)
 
     def close(self) -> None:
+        if self.record is not None and self._unsaved:
+            self.record.save()
+            self._unsaved = 0
         if self.bar is not None:
             self.bar.close()
 

@@ -8,6 +8,7 @@ import hashlib
 import io
 import json
 import os
+import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -37,9 +38,9 @@ QUANTITIES: tuple[str, ...] = (
     "alpha_star",
 )
 _FORMAT = 1
-_OWN_FILES = ("manifest.json", "aggregate.csv", "thresholds.csv", "ensemble.json")
-_OWN_FILES += ("leakage.csv", "leak_thresholds.csv")  # leak-rate statistics (_leakage)
-_OWN_DIRS = ("tasks", "figures")
+#: Temporaries of atomic writes, ``.<name>.<pid>.<hex token>.tmp`` (any token length, as the
+#: figure writer's clean-up accepts); a user's ``.notes.tmp`` does not match.
+_TEMPORARY = re.compile(r"^\..+\.\d+\.[0-9a-f]+\.tmp$")
 
 
 @dataclass(frozen=True)
@@ -90,8 +91,9 @@ def _run_id(identity: Mapping[str, Any]) -> str:
     return hashlib.sha256(text.encode("utf-8")).hexdigest()
 
 
-def _write_task(out: Path, result: _TaskOutput, run_id: str) -> None:
-    """Write a finished task: its JSON, then its CSV (the completion marker), atomically.
+def _write_task(out: Path, result: _TaskOutput, run_id: str) -> list[Path]:
+    """Write a finished task: its JSON, then its CSV (the completion marker), atomically;
+    returns both paths.
 
     The JSON carries the run id, the SHA-256 of the CSV and its own SHA-256 (as sweep
     checkpoints do), so that a table edited or damaged afterwards is never aggregated.
@@ -103,8 +105,51 @@ def _write_task(out: Path, result: _TaskOutput, run_id: str) -> None:
     meta["csv_sha256"] = hashlib.sha256(result.csv_text.encode("utf-8")).hexdigest()
     meta = json.loads(_dumps(meta))  # the JSON form that is hashed and read back
     meta["sha256"] = _record_digest(meta)
-    atomic_write_text(_task_json(out, result.key, result.seed), _dumps(meta))
-    atomic_write_text(_task_csv(out, result.key, result.seed), result.csv_text)
+    return [
+        atomic_write_text(_task_json(out, result.key, result.seed), _dumps(meta)),
+        atomic_write_text(_task_csv(out, result.key, result.seed), result.csv_text),
+    ]
+
+
+def _own_task_files(out: Path) -> list[Path]:
+    """The task files under ``out/tasks`` that leakpath wrote, recognised by content.
+
+    A task JSON counts when it matches its own checksum and names the task of its place
+    (``tasks/<key>/seed-<seed>.json``); its CSV when its bytes match the checksum that JSON
+    records. A user's file there, or an edited one, is not listed.
+    """
+    own: list[Path] = []
+    tasks = out.resolve() / "tasks"
+    for meta_path in sorted(out.glob("tasks/*/seed-*.json")):
+        if meta_path.is_symlink() or not meta_path.is_file():
+            continue
+        try:  # a linked directory leading elsewhere is not the ensemble's
+            if meta_path.parent.resolve() != tasks / meta_path.parent.name:
+                continue
+        except OSError:
+            continue
+        try:
+            meta = json.loads(meta_path.read_bytes().decode("utf-8"))
+        except (OSError, ValueError):
+            continue
+        if (
+            not isinstance(meta, dict)
+            or meta.get("sha256") != _record_digest(meta)
+            or not isinstance(meta.get("run"), str)
+            or meta.get("key") != meta_path.parent.name
+            or meta_path.name != f"seed-{meta.get('seed')}.json"
+        ):
+            continue
+        own.append(meta_path)
+        csv_path = meta_path.with_suffix(".csv")
+        try:
+            if csv_path.is_symlink():
+                continue
+            if hashlib.sha256(csv_path.read_bytes()).hexdigest() == meta.get("csv_sha256"):
+                own.append(csv_path)
+        except OSError:
+            pass
+    return own
 
 
 class _BadTask(Exception):
@@ -178,10 +223,13 @@ def _read_task(out: Path, run_id: str, ps: ParamSet, seed: int) -> list[dict[str
 
 def _clean_stale_temporaries(out: Path) -> None:
     """Remove the hidden temporaries of atomic writes cut short by a killed run: in the task
-    directories, ``figures/`` and ``DIR`` itself."""
+    directories, ``figures/`` and ``DIR`` itself (only files named like them, never a user's
+    own ``.notes.tmp``)."""
     patterns = ("tasks/*/.*.tmp", "figures/.*.tmp", ".*.tmp")
     for pattern in patterns:
         for stale in out.glob(pattern):
+            if not _TEMPORARY.match(stale.name) or not stale.is_file():
+                continue
             try:
                 stale.unlink()
             except OSError:

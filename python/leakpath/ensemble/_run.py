@@ -5,7 +5,6 @@ from __future__ import annotations
 import json
 import numbers
 import os
-import shutil
 import time
 import warnings
 from collections.abc import Callable, Iterable, Mapping, Sequence
@@ -17,6 +16,7 @@ import numpy as np
 from .._core import __version__
 from .._io import atomic_write_text
 from .._io import dumps as _dumps
+from .._outputs import RECORD_NAME, OutputRecord, OverwriteNote, prune_empty_dirs
 from ..contact import SOLVERS, contact_modulus
 from ..surfaces import Surface
 from ._aggregate import EnsembleResult, aggregate
@@ -31,10 +31,9 @@ from ._executors import (
 )
 from ._layout import (
     _FORMAT,
-    _OWN_DIRS,
-    _OWN_FILES,
     _clean_stale_temporaries,
     _identity,
+    _own_task_files,
     _read_manifest,
     _run_id,
     _task_problem,
@@ -76,37 +75,80 @@ def _resolve_seeds(surfaces: Any, seeds: Any) -> tuple[int, ...]:
     return tuple(sorted(out))
 
 
-def _prepare_directory(out: Path, resume: bool, overwrite: bool) -> dict[str, Any] | None:
-    """Check/clean ``out`` for a new run or a resumed one; returns the old manifest if any."""
+def _prepare_directory(
+    out: Path, resume: bool, overwrite: bool
+) -> tuple[dict[str, Any] | None, OutputRecord]:
+    """Check/clean ``out`` for a new run or a resumed one; returns the old manifest if any,
+    and the record of the files this run writes (a resumed run adds to the earlier one's)."""
     if resume and overwrite:
         raise ValueError("resume, overwrite: choose one (resume keeps finished tasks)")
     if out.exists() and not out.is_dir():
         raise ValueError(f"out: {str(out)!r} exists and is not a directory")
+    record = OutputRecord(out)
     if not out.exists():
         out.mkdir(parents=True)
-        return None
+        return None, record
     if resume:
         if (out / "manifest.json").exists():
-            return _read_manifest(out)
+            manifest = _read_manifest(out)
+            record.read()
+            return manifest, record
         if any(out.iterdir()):
             raise ValueError(
                 f"out: {str(out)!r} is not empty and holds no leakpath ensemble to resume"
             )
-        return None
+        return None, record
     if overwrite:
-        for name in _OWN_DIRS:
-            if (out / name).is_dir():
-                shutil.rmtree(out / name)
-        for name in _OWN_FILES:
-            if (out / name).is_file():
-                (out / name).unlink()
-        return None
+        _clear_earlier_run(out, record)
+        return None, record
     if any(out.iterdir()):
         raise FileExistsError(
             f"out: {str(out)!r} is not empty; resume the ensemble there (resume=True, CLI "
             "--resume) or replace it (overwrite=True, CLI --overwrite)"
         )
-    return None
+    return None, record
+
+
+def _listing(names: Sequence[str], limit: int = 5) -> str:
+    shown = ", ".join(names[:limit])
+    return shown + (f" and {len(names) - limit} more" if len(names) > limit else "")
+
+
+def _clear_earlier_run(out: Path, record: OutputRecord) -> None:
+    """Delete what an earlier ensemble in ``out`` provably wrote; warn
+    (:class:`OverwriteNote`) about what stays.
+
+    Task files recognised by their checksums go first, so that a task file the user only
+    touched (same bytes, new time) is not reported as kept; then the recorded files still
+    as the run left them. A user's file, even under ``tasks/`` or ``figures/``, stays.
+    """
+    had_record = record.read()
+    removed = _own_task_files(out)
+    for path in removed:
+        path.unlink()
+    kept = record.remove_unchanged() if had_record else []
+    removed += record.removed
+    _clean_stale_temporaries(out)
+    prune_empty_dirs(out, removed)
+    if kept:
+        warnings.warn(
+            f"overwrite: kept {len(kept)} file(s) in {str(out)!r} that changed since the "
+            f"earlier run wrote them: {_listing(kept)}",
+            OverwriteNote,
+            stacklevel=4,
+        )
+    left = sorted(
+        p.relative_to(out).as_posix() for p in out.rglob("*") if p.is_file() or p.is_symlink()
+    )
+    if not had_record and left:
+        warnings.warn(
+            f"overwrite: {str(out)!r} holds no record of the files an earlier run wrote "
+            f"({RECORD_NAME}), so only its task files recognised by their checksums were "
+            f"removed; {len(left)} other file(s) stay unless this run rewrites them: "
+            f"{_listing(left)}",
+            OverwriteNote,
+            stacklevel=4,
+        )
 
 
 # ============================================================================ entry point
@@ -174,7 +216,11 @@ def ensemble(
         missing ones, and again those whose files fail (named in a ``RuntimeWarning`` and in
         ``run["recomputed"]``).
     overwrite : bool
-        Delete a previous ensemble's files in ``DIR`` first (only this module's files).
+        Replace a previous ensemble in ``DIR``: delete the files its run recorded writing
+        (``DIR/.leakpath-outputs.json``) that are still as it left them, and task files
+        recognised by their checksums; a user's file stays, and an
+        :class:`OverwriteNote` warning names recorded files kept because
+        they changed (or says that a directory without a record lost only its task files).
     progress : bool
         tqdm progress bar over tasks on stderr (silent when stderr is not a terminal).
     figures : bool
@@ -290,7 +336,7 @@ def ensemble(
             boundary,
         )
         directory = Path(out)
-        old = _prepare_directory(directory, resume, overwrite)
+        old, record = _prepare_directory(directory, resume, overwrite)
         if old is not None and old.get("identity") != json.loads(_dumps(identity)):
             diff = sorted(k for k in identity if old["identity"].get(k) != identity[k])
             raise ValueError(
@@ -307,7 +353,9 @@ def ensemble(
                 {"key": ps.key, "params": ps.params, "seeds": list(ps.seeds)} for ps in param_sets
             ],
         }
-        atomic_write_text(directory / "manifest.json", _dumps(manifest))
+        # Every file the run writes is recorded, so that a later overwrite removes exactly
+        # those (and never a user's file kept beside them).
+        record.add([atomic_write_text(directory / "manifest.json", _dumps(manifest))])
 
         kill_once = _kill_once
         run_id = _run_id(identity)
@@ -349,7 +397,9 @@ def ensemble(
                 RuntimeWarning,
                 stacklevel=2,
             )
-        driver = _Driver(directory, run_id, len(all_tasks), len(resumed), progress, _stop_after)
+        driver = _Driver(
+            directory, run_id, len(all_tasks), len(resumed), progress, _stop_after, record
+        )
         t_run = time.perf_counter()
         try:
             if not todo:
@@ -384,7 +434,7 @@ def ensemble(
             "compute_seconds": driver.compute_seconds,
             "wall_seconds": time.perf_counter() - t_start,
         }
-        return aggregate(directory, figures=figures, run=run)
+        return aggregate(directory, figures=figures, run=run, _record=record)
     finally:
         if own_client is not None:
             own_client.close()
