@@ -94,11 +94,12 @@ def _closed(gap: np.ndarray) -> np.ndarray:
     return gap <= 0
 
 
-@pytest.mark.parametrize("seed", range(4))
+# Fields on which the Cholesky factor of the assembled matrix alone was off by 2 %, 22 %
+# and 55 %, or met a non-positive pivot.
+@pytest.mark.parametrize("seed", [122, 128, 147, 139])
 def test_gaps_spanning_nine_decades_match_the_exact_rational_flow(seed):
-    # Every cell open, g³ over 27 decades: the Cholesky factor of the rounded matrix breaks
-    # down or is off by any factor on such fields.
-    rng = np.random.default_rng(100 + seed)
+    # Every cell open, g³ over 27 decades.
+    rng = np.random.default_rng(seed)
     gap = 10.0 ** rng.uniform(-8.9, 0.0, size=(6, 6))
     exact = _exact_flow(gap, _closed(gap))
     assert exact > 0
