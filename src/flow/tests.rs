@@ -926,14 +926,16 @@ fn elimination_matches_the_factor_on_ordinary_gaps() {
         .map(|k| if k >= (ny - 1) * nx { 2.0 * c[k] } else { 0.0 })
         .collect();
     let elim = gth::Elimination::new(&st, None).unwrap();
-    let mut x = vec![0.0; ny * nx];
-    elim.solve(&b_in, &mut x);
     let mut f = direct::Factor::new(&st, None).unwrap();
-    let mut y = vec![0.0; ny * nx];
-    f.solve(&st, &b_in, &mut y);
-    for k in 0..ny * nx {
-        if st.active[k] {
-            assert!((x[k] - y[k]).abs() < 1e-13, "{k}: {} vs {}", x[k], y[k]);
+    for b in [&b_in, &b_out] {
+        let mut x = vec![0.0; ny * nx];
+        elim.solve(b, &mut x);
+        let mut y = vec![0.0; ny * nx];
+        f.solve(&st, b, &mut y);
+        for k in 0..ny * nx {
+            if st.active[k] {
+                assert!((x[k] - y[k]).abs() < 1e-13, "{k}: {} vs {}", x[k], y[k]);
+            }
         }
     }
 }
