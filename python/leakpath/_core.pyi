@@ -80,6 +80,7 @@ class FlowResult(_TypedDict):
     flow_rate: float
     inlet_flow_rate: float
     conductance: float
+    permeability: float
     residual: float
     conservation: float
     iterations: int
@@ -278,7 +279,8 @@ def solve_reynolds_flow(
     reservoir), ``flux_axis0`` (ny + 1, nx),
     ``flux_axis1`` (ny, nx + 1) (volume per time through each face, positive towards
     increasing index), ``flow_rate`` (outlet), ``inlet_flow_rate``, ``conductance``
-    (``Q/Δp``), ``residual``, ``conservation`` (largest net cell flux / Q), ``iterations``,
+    (``Q/Δp``), ``permeability`` (``Q η L/(W Δp)``), ``residual``, ``conservation``
+    (largest net cell flux / Q), ``iterations``,
     ``n_unknowns``, ``levels``, ``solver`` (the one that ran: "cholesky", "multigrid" or
     "none" when nothing spans), ``seconds``. ``InvalidArgumentError`` for bad input,
     ``NotConvergedError`` past ``max_iter`` (default 20000), ``ProblemTooLargeError`` above

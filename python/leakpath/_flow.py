@@ -10,6 +10,8 @@ Conventions (docs/flow.md):
 * Flow along ``axis``: inlet reservoir at ``pressure_drop`` before the first index, outlet at
   0 after the last one, each half a cell from the boundary cells' centres (face conductance
   ``2c``). Side walls carry no flux, or wrap when ``periodic``.
+* Free cells with a negative gap within ``ROUND_OFF`` (1e-9) of the largest free gap are
+  contact (a contact solve's round-off; docs/flow.md "Supported range of gaps").
 * Unknowns on the clusters (4-connectivity, as :func:`leakpath.percolation`) that join inlet
   and outlet; clusters touching only the inlet sit at ``Δp``, only the outlet at 0, others
   have no pressure (NaN). ``Q = 0`` exactly when nothing spans.
@@ -28,6 +30,7 @@ hydraulic aperture ``(12 K)^{1/3}`` (``g`` for plates).
 
 from __future__ import annotations
 
+import math
 import numbers
 from dataclasses import dataclass, field
 from typing import Any
@@ -46,6 +49,12 @@ __all__ = ["DEFAULT_TOL", "Flow", "flow"]
 #: conduct nothing while :func:`leakpath.percolation` counts it open. Such a neck passes
 #: ~1e-150 of the flow of the largest gap: no gap a contact solve returns is that small.
 GAP_FLOOR = 1e-50
+
+#: Negative gaps off contact down to this fraction of the largest free gap are a contact
+#: solve's round-off (it leaves ``|g|`` up to ~2e-12 of the largest gap on its contact cells,
+#: of either sign) and count as contact, as :func:`leakpath.percolation` counts them; more
+#: negative ones are refused.
+ROUND_OFF = 1e-9
 
 #: Default relative residual ``‖b − Ax‖₂/‖b‖₂`` (also the aimed inlet/outlet agreement).
 DEFAULT_TOL = 1e-12
@@ -133,25 +142,79 @@ def _number(name: str, value: Any, *, positive: bool = False) -> float:
     """A finite real number (``> 0`` with ``positive``); ints beyond the float range, bools
     and strings are refused naming ``name``."""
     if positive:
-        return _validate.positive(name, value)
-    return _validate.real(name, value)
+        return _validate.positive(name, value, hint="pass a float")
+    return _validate.real(name, value, hint="pass a float")
 
 
-def _floor_open_gaps(gap: np.ndarray, contact: np.ndarray | None) -> np.ndarray:
-    """The gap with open gaps (``g > 0`` off contact) raised to ``GAP_FLOOR·g_max``
-    (a new array only if any is below)."""
-    open_ = gap > 0
-    if contact is not None:
-        open_ &= ~contact
-    if not open_.any():
+def _prepare_gaps(gap: np.ndarray, contact: np.ndarray | None) -> np.ndarray:
+    """The gap with free negative gaps within ``ROUND_OFF·g_max`` set to 0 (contact) and open
+    gaps (``g > 0`` off contact) raised to ``GAP_FLOOR·g_max`` (a new array only if any
+    changes); a free gap below ``−ROUND_OFF·g_max`` is refused."""
+    if not np.isfinite(gap).all():  # refused by the core with its message
         return gap
-    floor = float(gap[open_].max()) * GAP_FLOOR
-    if not np.isfinite(floor):  # infinite gaps: refused by the core with its message
+    free = np.ones(gap.shape, dtype=bool) if contact is None else ~contact
+    gmax = float(gap[free].max()) if free.any() else 0.0
+    gmax = max(gmax, 0.0)
+    bad = free & (gap < -ROUND_OFF * gmax)
+    if bad.any():
+        i, j = np.argwhere(bad)[0]
+        raise InvalidArgumentError(
+            f"gap: the value {gap[i, j]!r} at ({i}, {j}) is negative on a free cell (beyond "
+            f"the round-off band {ROUND_OFF:g} × the largest free gap {gmax!r}); gaps must be "
+            "≥ 0 off contact: pass the contact mask, or clip the gap at 0",
+            argument="gap",
+        )
+    negative = free & (gap < 0)
+    tiny = free & (gap > 0) & (gap < gmax * GAP_FLOOR)
+    if not (negative.any() or tiny.any()):
         return gap
-    tiny = open_ & (gap < floor)
-    if not tiny.any():
-        return gap
-    return np.ascontiguousarray(np.where(tiny, floor, gap))
+    return np.ascontiguousarray(np.where(negative, 0.0, np.where(tiny, gmax * GAP_FLOOR, gap)))
+
+
+def _scaled(nums: tuple[float, ...], dens: tuple[float, ...] = ()) -> tuple[float, int]:
+    """``Π nums / Π dens`` as mantissa and exponent (``m 2^e``): no intermediate over- or
+    underflows, so the product is right whenever it is representable."""
+    m, e = 1.0, 0
+    for v, sign in [(v, 1) for v in nums] + [(v, -1) for v in dens]:
+        fm, fe = math.frexp(v)
+        if fm == 0.0:
+            return 0.0, 0
+        m = m * fm if sign > 0 else m / fm
+        e += sign * fe
+        m, de = math.frexp(m)
+        e += de
+    return m, e
+
+
+def _value(m: float, e: int) -> float:
+    """``m 2^e`` as a float (±inf when it overflows)."""
+    try:
+        return math.ldexp(m, e)
+    except OverflowError:
+        return math.copysign(math.inf, m)
+
+
+def _approx(scaled: tuple[float, int]) -> str:
+    """``m 2^e`` written as a power of ten (it may not fit a double)."""
+    m, e = scaled
+    if m == 0.0:
+        return "0"
+    return f"1e{math.log10(abs(m)) + e * math.log10(2.0):.0f}"
+
+
+def _representable(name: str, what: str, scaled: tuple[float, int], formula: str) -> float:
+    """The value ``m 2^e`` of ``scaled``, refused naming ``name`` when it is not zero and not a
+    normal double (∞, or 0 or a subnormal with its digits lost)."""
+    v = _value(*scaled)
+    if scaled[0] != 0.0 and not (_validate._FLOAT_MIN <= abs(v) < math.inf):
+        side = "above" if abs(v) == math.inf else "below"
+        raise InvalidArgumentError(
+            f"{name}: the {what} {formula} is {side} the range of a double (normal numbers "
+            "2.2e-308 to 1.8e308); express the pressures (and lengths) in units that bring "
+            "it into range",
+            argument=name,
+        )
+    return v
 
 
 def _is_state(obj: Any) -> bool:
@@ -210,9 +273,14 @@ def flow(
 
     Raises:
         InvalidArgumentError: naming the argument (NaN or infinite gaps, negative gaps off
-            contact, wrong shapes, ``η ≤ 0``, non-finite ``Δp``, bools or strings given as
-            numbers, a bad ``axis``).
-        NotConvergedError: ``max_iter`` reached.
+            contact beyond ``ROUND_OFF·g_max``, wrong shapes, ``η ≤ 0``, non-finite ``Δp``,
+            numbers beyond the float range, bools or strings given as numbers, a bad
+            ``axis``; a flow rate, conductance, permeability or gas mass flow that is not a
+            normal double, naming ``gap``, ``viscosity``, ``pressure_drop``,
+            ``inlet_pressure`` or ``outlet_pressure``).
+        NotConvergedError: ``max_iter`` reached, or an answer that fails its checks (rates
+            disagreeing, or a cell's net flux above 1e-6 of ``Q``: necks whose ``g³`` is
+            below ~1e-21 of the wide cells between them).
         ProblemTooLargeError: the solve would need more than ``memory_limit`` bytes.
     """
     if isinstance(axis, (bool, np.bool_)) or not isinstance(axis, numbers.Integral):
@@ -250,13 +318,10 @@ def flow(
                 )
         r_s = _number("gas_constant", gas_constant, positive=True)
         temp = _number("temperature", temperature, positive=True)
-        # φ = p² obeys the liquid's equation: solve it with Δφ = p_in² − p_out².
-        dp = p_in * p_in - p_out * p_out
-        if not np.isfinite(dp):
-            raise InvalidArgumentError(
-                "inlet_pressure: p_in² − p_out² overflows; express pressures in a larger unit",
-                argument="inlet_pressure",
-            )
+        # φ = p² obeys the liquid's equation: solve it at unit Δφ and scale by
+        # p_in² − p_out² = (p_in − p_out)(p_in + p_out) afterwards (never formed: it
+        # over- or underflows long before the mass flow does).
+        dp = 1.0
     else:
         for name, value in gas_inputs.items():
             if value is not None:
@@ -333,7 +398,7 @@ def flow(
             f"periodic: must be True, False or None, got {periodic!r}", argument="periodic"
         )
 
-    gap = _floor_open_gaps(gap, contact)
+    gap = _prepare_gaps(gap, contact)
 
     if solver not in ("auto", "cholesky", "multigrid"):
         raise InvalidArgumentError(
@@ -357,23 +422,51 @@ def flow(
         solver=solver,
         threads=None if threads is None else int(threads),
     )
-    ny, nx = gap.shape
-    n_along, n_across = (ny, nx) if axis == 0 else (nx, ny)
     conductance = float(res["conductance"])
-    permeability = conductance * eta * n_along / n_across
+    permeability = float(res["permeability"])
     q_out, q_in = float(res["flow_rate"]), float(res["inlet_flow_rate"])
     pressure, f0, f1 = res["pressure"], res["flux_axis0"], res["flux_axis1"]
     gas_fields: dict[str, Any] = {}
     if gas:
-        scale = 1.0 / (2.0 * r_s * temp)  # φ-flux → mass flux
-        mass = q_out * scale
-        rho_out = p_out / (r_s * temp)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            q_out = mass / rho_out if rho_out > 0 else float("inf")
-            q_in = q_in * scale / rho_out if rho_out > 0 else float("inf")
-        pressure = np.sqrt(np.maximum(pressure + p_out * p_out, 0.0))
-        f0, f1 = f0 * scale, f1 * scale
-        dp = p_in - p_out
+        # The solve ran at unit Δφ: its rates are C and the fluxes C-scaled. Mass flow
+        # ṁ = C (p_in − p_out)(p_in + p_out)/(2 R_s T); volume flow at the outlet ṁ R_s T/p_out.
+        diff, tot = p_in - p_out, p_in + p_out
+        pair = (diff, tot) if diff != 0.0 else (0.0,)
+        spans = bool(res["n_unknowns"])
+        mass_s = _scaled((q_out, *pair), (2.0, r_s, temp))
+        mass = _value(*mass_s)
+        if spans:
+            mass = _representable(
+                "inlet_pressure",
+                "mass flow rate",
+                mass_s,
+                f"ṁ = C (p_in² − p_out²)/(2 R_s T) ≈ {_approx(mass_s)}",
+            )
+        if p_out > 0:
+            vol_s = _scaled((q_out, *pair), (2.0, p_out))
+            q_vol = _value(*vol_s)
+            q_in = _value(*_scaled((q_in, *pair), (2.0, p_out)))
+            if spans:
+                q_vol = _representable(
+                    "outlet_pressure",
+                    "volume flow rate at the outlet",
+                    vol_s,
+                    f"ṁ R_s T/p_out ≈ {_approx(vol_s)}",
+                )
+            q_out = q_vol
+        else:
+            q_out = q_in = math.inf
+        pm = max(p_in, p_out)
+        with np.errstate(invalid="ignore"):
+            if pm > 0:
+                a, b = p_in / pm, p_out / pm
+                pressure = pm * np.sqrt(np.maximum(b * b + (a * a - b * b) * pressure, 0.0))
+            else:
+                pressure = pressure * 0.0
+        fm, fe = _scaled(pair, (2.0, r_s, temp))
+        with np.errstate(over="ignore", under="ignore"):
+            f0, f1 = np.ldexp(f0 * fm, fe), np.ldexp(f1 * fm, fe)
+        dp = diff
         gas_fields = {
             "gas": True,
             "mass_flow_rate": mass,
@@ -387,7 +480,7 @@ def flow(
         inlet_flow_rate=q_in,
         conductance=conductance,
         permeability=permeability,
-        hydraulic_aperture=float(np.cbrt(12.0 * permeability)),
+        hydraulic_aperture=float(np.cbrt(12.0) * np.cbrt(permeability)),
         pressure=pressure,
         flux_axis0=f0,
         flux_axis1=f1,

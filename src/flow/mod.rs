@@ -38,6 +38,7 @@
 pub mod assemble;
 pub mod cg;
 pub mod direct;
+pub mod gth;
 pub mod multigrid;
 
 use rayon::prelude::*;
@@ -146,6 +147,8 @@ pub struct Solution {
     pub inlet_flow_rate: f64,
     /// `Q / Δp`, computed from the unit-pressure solution (defined for `Δp = 0` too).
     pub conductance: f64,
+    /// `K = Q η L / (W Δp)` (length³), from the unit-pressure solution.
+    pub permeability: f64,
     /// True relative residual of the linear system.
     pub residual: f64,
     /// Largest net flux out of a cell, relative to `Q` (0 when `Q = 0`).
@@ -297,16 +300,35 @@ pub fn solve(pr: &Problem<'_>, opts: &Options<'_>) -> Result<Solution> {
     let unit = solve_axis0(&open_gap, ny, nx, pr.periodic, opts)?;
     drop(open_gap);
 
-    // Dimensional scale: c = ĉ g_ref³ / (12 η), p = Δp φ.
-    let cscale = unit.gref.powi(3) / (12.0 * pr.viscosity);
-    let qscale = cscale * pr.pressure_drop;
+    // Dimensional scale: c = ĉ g_ref³ / (12 η), p = Δp φ, each factor kept as mantissa and
+    // exponent so that the result is finite whenever it is representable (g_ref³ alone
+    // overflows from g_ref ≈ 5.6e102, 1/η from η ≈ 5.6e-309).
+    let g3 = Scale::of(unit.gref).pow3();
+    let cscale = g3.div(Scale::of(12.0)).div(Scale::of(pr.viscosity));
     let dp = pr.pressure_drop;
+    let qscale = cscale.mul(Scale::of(dp.abs()));
+    let sign = if dp < 0.0 { -1.0 } else { 1.0 };
+    let (n_along, n_across) = (ny as f64, nx as f64);
+    let kscale = g3.div(Scale::of(12.0 * n_across)).mul(Scale::of(n_along));
+    if unit.n_unknowns > 0 {
+        check_range(pr, unit.gref, "flow rate", dp != 0.0, qscale, unit.q_out)?;
+        check_range(pr, unit.gref, "flow rate", dp != 0.0, qscale, unit.q_in)?;
+        check_range(pr, unit.gref, "conductance", true, cscale, unit.q_out)?;
+        check_range(pr, unit.gref, "permeability", true, kscale, unit.q_out)?;
+    }
     let mut pressure = unit.phi;
     pressure.par_iter_mut().for_each(|v| *v *= dp);
     let mut fa = unit.flux_along;
     let mut fb = unit.flux_across;
-    fa.par_iter_mut().for_each(|v| *v *= qscale);
-    fb.par_iter_mut().for_each(|v| *v *= qscale);
+    let flux = |v: &mut f64| {
+        *v = if dp == 0.0 {
+            0.0
+        } else {
+            sign * qscale.apply(*v)
+        }
+    };
+    fa.par_iter_mut().for_each(flux);
+    fb.par_iter_mut().for_each(flux);
     let (pressure, flux_axis0, flux_axis1) = if pr.axis == 0 {
         (pressure, fa, fb)
     } else {
@@ -321,9 +343,18 @@ pub fn solve(pr: &Problem<'_>, opts: &Options<'_>) -> Result<Solution> {
         pressure,
         flux_axis0,
         flux_axis1,
-        flow_rate: unit.q_out * qscale,
-        inlet_flow_rate: unit.q_in * qscale,
-        conductance: unit.q_out * cscale,
+        flow_rate: if dp == 0.0 {
+            0.0
+        } else {
+            sign * qscale.apply(unit.q_out)
+        },
+        inlet_flow_rate: if dp == 0.0 {
+            0.0
+        } else {
+            sign * qscale.apply(unit.q_in)
+        },
+        conductance: cscale.apply(unit.q_out),
+        permeability: kscale.apply(unit.q_out),
         residual: unit.residual,
         conservation: unit.conservation,
         iterations: unit.iterations,
@@ -331,6 +362,134 @@ pub fn solve(pr: &Problem<'_>, opts: &Options<'_>) -> Result<Solution> {
         levels: unit.levels,
         solver: unit.solver,
     })
+}
+
+/// A positive factor `m 2^e` (`m` in `[½, 1)`), so that products of factors that would over-
+/// or underflow on their own are exact to a few roundings whenever the result is
+/// representable.
+#[derive(Clone, Copy, Debug)]
+struct Scale {
+    m: f64,
+    e: i32,
+}
+
+impl Scale {
+    /// `v > 0` finite (0 gives the zero factor).
+    fn of(v: f64) -> Scale {
+        if v == 0.0 || !v.is_finite() {
+            return Scale { m: v, e: 0 };
+        }
+        // Subnormals: scale into the normal range first.
+        let (v, adj) = if v.abs() < f64::MIN_POSITIVE {
+            (v * 2f64.powi(64), -64)
+        } else {
+            (v, 0)
+        };
+        let bits = v.to_bits();
+        let e = ((bits >> 52) & 0x7ff) as i32 - 1022;
+        let m = f64::from_bits((bits & !(0x7ffu64 << 52)) | (1022u64 << 52));
+        Scale { m, e: e + adj }
+    }
+
+    fn norm(self) -> Scale {
+        let s = Scale::of(self.m);
+        Scale {
+            m: s.m,
+            e: s.e + self.e,
+        }
+    }
+
+    fn mul(self, o: Scale) -> Scale {
+        Scale {
+            m: self.m * o.m,
+            e: self.e + o.e,
+        }
+        .norm()
+    }
+
+    fn div(self, o: Scale) -> Scale {
+        Scale {
+            m: self.m / o.m,
+            e: self.e - o.e,
+        }
+        .norm()
+    }
+
+    fn pow3(self) -> Scale {
+        self.mul(self).mul(self)
+    }
+
+    /// `v m 2^e`, rounded once more at most where it leaves the normal range.
+    fn apply(self, v: f64) -> f64 {
+        let mut x = v * self.m;
+        let mut e = self.e;
+        while e > 1000 && x.is_finite() && x != 0.0 {
+            x *= 2f64.powi(1000);
+            e -= 1000;
+        }
+        while e < -1000 && x.is_finite() && x != 0.0 {
+            x *= 2f64.powi(-1000);
+            e += 1000;
+        }
+        if x == 0.0 || !x.is_finite() {
+            return x;
+        }
+        x * 2f64.powi(e)
+    }
+
+    fn log10(self) -> f64 {
+        self.m.log10() + self.e as f64 * std::f64::consts::LOG10_2
+    }
+}
+
+/// Refuses a reported quantity `unit · scale` that is not a normal double (it would be
+/// returned as ∞, or as 0 or a subnormal with digits lost, while the flow spans), naming the
+/// argument that pushes it furthest out of range.
+fn check_range(
+    pr: &Problem<'_>,
+    gref: f64,
+    what: &str,
+    applies: bool,
+    scale: Scale,
+    unit: f64,
+) -> Result<()> {
+    if !applies || unit == 0.0 {
+        return Ok(());
+    }
+    let v = scale.apply(unit.abs());
+    if v.is_finite() && v >= f64::MIN_POSITIVE {
+        return Ok(());
+    }
+    let log = scale.log10() + unit.abs().log10();
+    let over = log > 0.0;
+    // Each argument's share of log10 of the result.
+    let mut parts: Vec<(&'static str, f64)> = vec![("gap", 3.0 * gref.log10())];
+    if what != "permeability" {
+        parts.push(("viscosity", -pr.viscosity.log10()));
+    }
+    if what == "flow rate" {
+        parts.push(("pressure_drop", pr.pressure_drop.abs().log10()));
+    }
+    let pick = |a: &&(&'static str, f64), b: &&(&'static str, f64)| a.1.total_cmp(&b.1);
+    let name = if over {
+        parts.iter().max_by(pick)
+    } else {
+        parts.iter().min_by(pick)
+    }
+    .map(|p| p.0)
+    .unwrap_or("gap");
+    Err(Error::invalid(
+        name,
+        format!(
+            "the {what} would be about 1e{log:.0}, {} the range of a double (normal numbers \
+             2.2e-308 to 1.8e308): it scales with g³/η (and Δp), here largest gap {gref:e}, \
+             viscosity {:e}, pressure drop {:e}; express lengths, pressures and viscosity in \
+             units that bring it into range",
+            if over { "above" } else { "below" },
+            pr.viscosity,
+            pr.pressure_drop
+        ),
+    ))
 }
 
 /// The dimensionless solution for flow along axis 0 with `φ = 1` at the inlet, 0 at the outlet,
@@ -417,19 +576,36 @@ fn solve_axis0(
             (None, None) => None,
         }
     };
+    // `Some(Ok)`: a factor; `Some(Err)`: the factor broke down (a non-positive pivot of the
+    // rounded matrix); `None`: no factor (multigrid, or too large for `Auto`).
     let factor = if n_unknowns == 0 || opts.solver == Solver::Multigrid {
         None
     } else {
         match direct::Factor::new(&fine, factor_room) {
-            Ok(f) => Some(f),
+            Ok(f) => Some(Ok(f)),
             Err(Error::TooLarge { .. }) if opts.solver == Solver::Auto => None,
+            Err(e @ Error::NotConverged { .. }) => Some(Err(e)),
             Err(e) => return Err(e),
         }
     };
+    // `lo`: the parts of φ and ψ below the last digit of `x` and `psi` (the elimination's
+    // refinement; empty otherwise).
+    let mut lo = (Vec::new(), Vec::new());
     let (st, x, psi, residual, solver) = if n_unknowns == 0 {
         (fine, vec![0.0; n], vec![0.0; n], 0.0, "none")
-    } else if let Some(mut f) = factor {
-        let (x, psi, residual) = solve_direct(&mut f, &fine, &rhs, &b_out);
+    } else if let Some(f) = factor {
+        let trusted = f.ok().and_then(|mut f| {
+            let (x, psi, residual) = solve_direct(&mut f, &fine, &rhs, &b_out);
+            trusted(&fine, &rhs, &b_out, &x, &psi).then_some((x, psi, residual))
+        });
+        let (x, psi, residual) = match trusted {
+            Some(t) => t,
+            None => {
+                let (x, psi, residual, split) = solve_gth(&fine, &rhs, &b_out, factor_room)?;
+                lo = split;
+                (x, psi, residual)
+            }
+        };
         (fine, x, psi, residual, "cholesky")
     } else {
         let mg = Multigrid::new(fine);
@@ -454,15 +630,26 @@ fn solve_axis0(
     // A face flux `c_f (φ1 − φ2)` loses the digits of `φ` near 1 (all of the inlet side near
     // the percolation threshold, where the flow is many decades below the conductances):
     // there the same flux is `c_f (ψ2 − ψ1)` with `ψ = 1 − φ` solved for directly.
+    // With the low parts, a difference of two close pressures keeps the digits below the
+    // last one of `x` (the difference of the high parts is exact).
+    let (xlo, psilo) = (&lo.0, &lo.1);
+    let split = !xlo.is_empty();
     let face = |cf: f64, k: usize, l: usize| -> f64 {
         if cf <= 0.0 {
             0.0
         } else if x[k] + x[l] <= 1.0 {
-            cf * (x[k] - x[l])
+            if split {
+                cf * ((x[k] - x[l]) + (xlo[k] - xlo[l]))
+            } else {
+                cf * (x[k] - x[l])
+            }
+        } else if split {
+            cf * ((psi[l] - psi[k]) + (psilo[l] - psilo[k]))
         } else {
             cf * (psi[l] - psi[k])
         }
     };
+    let at = |v: &[f64], low: &[f64], k: usize| if split { v[k] + low[k] } else { v[k] };
     // Fluxes along: (ny + 1) × nx.
     let mut fa = vec![0.0; (ny + 1) * nx];
     fa.par_chunks_mut(nx).enumerate().for_each(|(i, row)| {
@@ -470,7 +657,7 @@ fn solve_axis0(
             row[j] = if i == 0 {
                 let cf = 2.0 * c[j];
                 if cf > 0.0 {
-                    cf * psi[j]
+                    cf * at(&psi, psilo, j)
                 } else {
                     0.0
                 }
@@ -478,7 +665,7 @@ fn solve_axis0(
                 let k = (ny - 1) * nx + j;
                 let cf = 2.0 * c[k];
                 if cf > 0.0 {
-                    cf * x[k]
+                    cf * at(&x, xlo, k)
                 } else {
                     0.0
                 }
@@ -502,6 +689,7 @@ fn solve_axis0(
     });
     drop(x);
     drop(psi);
+    drop(lo);
     let q_in: f64 = fa[..nx].iter().sum();
     let q_out: f64 = fa[ny * nx..].iter().sum();
     // Net flux out of every cell.
@@ -522,6 +710,19 @@ fn solve_axis0(
     } else {
         0.0
     };
+    if conservation > CONSERVATION_MAX || !conservation.is_finite() {
+        return Err(Error::NotConverged {
+            iterations,
+            residual,
+            what: format!(
+                "reynolds-flow {solver} (the flow rate {q_out:e} is resolved but the net flux \
+                 of a cell reaches {conservation:.1e} of it: the flow passes necks whose g³ is \
+                 below ~1e-21 of the wide regions between them, too many decades for the \
+                 face fluxes to balance in double precision; close the cells of negligible \
+                 gap (set gaps below e.g. 1e-6 of the largest to 0))"
+            ),
+        });
+    }
     Ok(UnitSolution {
         gref,
         phi,
@@ -537,6 +738,9 @@ fn solve_axis0(
         solver,
     })
 }
+
+/// Largest net flux out of a cell, relative to the flow rate, of a returned solution.
+pub const CONSERVATION_MAX: f64 = 1e-6;
 
 /// Largest relative difference allowed between the inlet and the outlet flow rates.
 pub const FLUX_AGREEMENT: f64 = 1e-9;
@@ -580,6 +784,107 @@ fn solve_direct(
 
 /// Inlet and outlet rates of a factored solve that agree to this need no reversed solve.
 const DIRECT_AGREEMENT: f64 = 1e-12;
+
+/// Largest first-order error of a flow rate, relative to the rate, at which the factor's
+/// answer is kept.
+const DIRECT_TRUST: f64 = 1e-12;
+
+/// Whether the refined factor's `φ` (inlet at 1) and `ψ` (outlet at 1) can be returned: both
+/// rates positive and finite, every pressure in `[0, 1]` (the maximum principle) to
+/// round-off, the first-order errors of the rates from the exact residuals,
+/// `ψ · (b_in − A φ)` and `φ · (b_out − A ψ)`, at most [`DIRECT_TRUST`] of them, and the
+/// rates agreeing to [`FLUX_AGREEMENT`]. The factor of the rounded matrix fails this when a
+/// region is joined to the rest only through faces below `ε` of its own (conductances
+/// spanning some sixteen decades or more).
+fn trusted(st: &assemble::Stencil, b_in: &[f64], b_out: &[f64], x: &[f64], psi: &[f64]) -> bool {
+    let (q_out, q_in) = (cg::dot(b_out, x), cg::dot(b_in, psi));
+    if !(q_out.is_finite() && q_in.is_finite() && q_out > 0.0 && q_in > 0.0) {
+        return false;
+    }
+    if !rates_agree(q_in, q_out) {
+        return false;
+    }
+    let in_range = |v: &[f64]| v.par_iter().all(|&t| (-1e-12..=1.0 + 1e-12).contains(&t));
+    if !(in_range(x) && in_range(psi)) {
+        return false;
+    }
+    let mut r = vec![0.0; x.len()];
+    st.residual_compensated(x, b_in, &mut r);
+    if cg::dot(psi, &r).abs() > DIRECT_TRUST * q_out {
+        return false;
+    }
+    st.residual_compensated(psi, b_out, &mut r);
+    cg::dot(x, &r).abs() <= DIRECT_TRUST * q_in
+}
+
+/// `φ`, `ψ`, the larger relative residual, and the low parts of `φ` and `ψ`.
+type GthOk = (Vec<f64>, Vec<f64>, f64, (Vec<f64>, Vec<f64>));
+
+/// Refinement steps of the low part after the cancellation-free elimination.
+const REFINE_SPLIT: usize = 2;
+
+/// `φ` and `ψ` by the cancellation-free elimination ([`gth`]): both from right-hand sides
+/// `≥ 0`, so each rate is a sum of positive terms accurate to a few `n ε` however widely the
+/// conductances spread; the rates must still agree to [`FLUX_AGREEMENT`]. Returns the larger
+/// relative residual of the two solves.
+fn solve_gth(
+    st: &assemble::Stencil,
+    b_in: &[f64],
+    b_out: &[f64],
+    room: Option<u64>,
+) -> Result<GthOk> {
+    let elim = match gth::Elimination::new(st, room) {
+        Ok(e) => e,
+        Err(Error::TooLarge { bytes, limit, what }) => {
+            return Err(Error::NotConverged {
+                iterations: 0,
+                residual: f64::NAN,
+                what: format!(
+                    "reynolds-flow sparse Cholesky: the factor's answer fails its checks (the \
+                     gap's conductances g³ span too many decades for it) and {what} is too \
+                     large here ({bytes} bytes for {limit} allowed, at most {} unknowns); \
+                     close the cells of negligible gap (e.g. set gaps below 1e-5 of the \
+                     largest to 0) or use a smaller grid",
+                    gth::MAX_UNKNOWNS
+                ),
+            })
+        }
+        Err(e) => return Err(e),
+    };
+    let n = b_in.len();
+    let (mut x, mut psi) = (vec![0.0; n], vec![0.0; n]);
+    elim.solve(b_in, &mut x);
+    elim.solve(b_out, &mut psi);
+    let (q_out, q_in) = (cg::dot(b_out, &x), cg::dot(b_in, &psi));
+    // Two refinement steps on the low part, residuals of `hi + lo` summed exactly: a pressure
+    // field whose cells balance to ~ε² of their conductances, not ε.
+    let rel = |r: &[f64], b: &[f64]| cg::dot(r, r).sqrt() / cg::dot(b, b).sqrt();
+    let refine = |hi: &[f64], b: &[f64]| {
+        let (mut lo, mut r, mut d) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
+        for _ in 0..REFINE_SPLIT {
+            st.residual_split(hi, &lo, b, &mut r);
+            elim.solve(&r, &mut d);
+            lo.iter_mut().zip(&d).for_each(|(l, v)| *l += v);
+        }
+        st.residual_split(hi, &lo, b, &mut r);
+        let res = rel(&r, b);
+        (lo, res)
+    };
+    let (xlo, rx) = refine(&x, b_in);
+    let (psilo, rpsi) = refine(&psi, b_out);
+    let residual = rx.max(rpsi);
+    if !(q_out.is_finite() && q_out > 0.0 && rates_agree(q_in, q_out)) {
+        return Err(Error::NotConverged {
+            iterations: 0,
+            residual,
+            what: format!(
+                "reynolds-flow elimination (inlet rate {q_in:e} and outlet rate {q_out:e} \
+                 differ)"
+            ),
+        });
+    }
+    Ok((x, psi, residual, (xlo, psilo)))
+}
 
 /// `Σ (1 − x_k) r_k`: to first order the error of the rate `w · x` of a solution `x` with
 /// residual `r`, since `w · (x* − x) = ψ* · r` with the adjoint `ψ* = A⁻¹ w = 1 − x*`.

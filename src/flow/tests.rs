@@ -882,3 +882,60 @@ fn the_order_is_a_permutation_of_the_unknowns_with_and_without_blocks() {
         }
     }
 }
+
+/// A column of wide cells with two necks: the wide cells between them are joined to the rest
+/// only through faces `g³ ~ 1e-15` of their own, which the rounded diagonal of the assembled
+/// matrix loses. The rate is the exact series resistance (a sum of positive terms).
+#[test]
+fn wide_cells_between_two_necks_give_the_series_rate() {
+    for &neck in &[1e-3, 1e-5, 1e-6] {
+        let ny = 9;
+        let mut gap = vec![1.0; ny];
+        gap[3] = neck;
+        gap[6] = neck;
+        let pr = problem(&gap, ny, 1, 0, false);
+        let sol = solve(&pr, &Options::default()).unwrap();
+        let c: Vec<f64> = gap
+            .iter()
+            .map(|g| g * g * g / (12.0 * pr.viscosity))
+            .collect();
+        let mut r = 1.0 / (2.0 * c[0]) + 1.0 / (2.0 * c[ny - 1]);
+        for k in 0..ny - 1 {
+            r += (c[k] + c[k + 1]) / (2.0 * c[k] * c[k + 1]);
+        }
+        let q = pr.pressure_drop / r;
+        assert!(
+            rel(sol.flow_rate, q) < 1e-13,
+            "{neck}: {} vs {q}",
+            sol.flow_rate
+        );
+        assert!(rel(sol.inlet_flow_rate, q) < 1e-13);
+        assert!(sol.conservation < 1e-6);
+    }
+}
+
+/// The cancellation-free elimination against the dense Cholesky reference on a field whose
+/// conductances stay within a few decades (where the reference is exact to round-off).
+#[test]
+fn elimination_matches_the_factor_on_ordinary_gaps() {
+    let (ny, nx) = (23, 17);
+    let gap = random_gap(11, ny * nx, 0.3);
+    let c: Vec<f64> = gap.iter().map(|g| g * g * g).collect();
+    let (st, b_in) = assemble::fine_stencil(&c, ny, nx, true);
+    let b_out: Vec<f64> = (0..ny * nx)
+        .map(|k| if k >= (ny - 1) * nx { 2.0 * c[k] } else { 0.0 })
+        .collect();
+    let elim = gth::Elimination::new(&st, None).unwrap();
+    let mut f = direct::Factor::new(&st, None).unwrap();
+    for b in [&b_in, &b_out] {
+        let mut x = vec![0.0; ny * nx];
+        elim.solve(b, &mut x);
+        let mut y = vec![0.0; ny * nx];
+        f.solve(&st, b, &mut y);
+        for k in 0..ny * nx {
+            if st.active[k] {
+                assert!((x[k] - y[k]).abs() < 1e-13, "{k}: {} vs {}", x[k], y[k]);
+            }
+        }
+    }
+}

@@ -94,6 +94,7 @@ pub(super) fn solve_reynolds_flow<'py>(
     d.set_item("flow_rate", sol.flow_rate)?;
     d.set_item("inlet_flow_rate", sol.inlet_flow_rate)?;
     d.set_item("conductance", sol.conductance)?;
+    d.set_item("permeability", sol.permeability)?;
     d.set_item("residual", sol.residual)?;
     d.set_item("conservation", sol.conservation)?;
     d.set_item("iterations", sol.iterations)?;
