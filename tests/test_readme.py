@@ -34,3 +34,31 @@ def test_readme_python_examples_run(tmp_path, monkeypatch) -> None:
     assert (tmp_path / "table.csv").stat().st_size > 0
     assert any((tmp_path / "figures").iterdir())
     assert out.getvalue().strip()
+
+
+def test_docs_name_only_modules_that_exist() -> None:
+    """Every ``leakpath.x.y`` the docs and the README name imports (modules) or resolves
+    (attributes), so a reader who follows them does not hit ModuleNotFoundError."""
+    import importlib
+
+    root = README.parent
+    names: set[str] = set()
+    for page in [README, *sorted((root / "docs").glob("*.md"))]:
+        names |= set(re.findall(r"`(leakpath(?:\.[A-Za-z_][A-Za-z0-9_]*)+)", page.read_text()))
+    missing = []
+    for name in sorted(names):
+        parts = name.split(".")
+        for cut in range(len(parts), 0, -1):
+            try:
+                obj = importlib.import_module(".".join(parts[:cut]))
+            except ModuleNotFoundError:
+                continue
+            try:
+                for attr in parts[cut:]:
+                    obj = getattr(obj, attr)
+            except AttributeError:
+                missing.append(name)
+            break
+        else:
+            missing.append(name)
+    assert not missing, missing

@@ -3,7 +3,9 @@
 A rough elastic surface is pressed against a rigid flat; for every imposed approach leakpath
 reports the contact area, load, free volume, the part of the free volume that belongs to
 channels crossing the interface, the leak rate through it, and Nayak's spectral moments of
-the deformed surface. ``docs/architecture.md`` shows how the package is laid out.
+the deformed surface. The conventions, solvers and layout are documented in the ``docs/``
+folder of the source repository (``docs/conventions.md``, ``docs/flow.md``,
+``docs/architecture.md``); every public function's docstring states its formulas and units.
 """
 
 from ._checkpoint import CheckpointMismatch
