@@ -161,35 +161,19 @@ impl Stencil {
     /// which is what lets iterative refinement correct the digits a factor loses when the
     /// conductances span many decades.
     pub fn residual_compensated(&self, x: &[f64], b: &[f64], r: &mut [f64]) {
-        let nx = self.nx;
-        r.par_chunks_mut(nx)
-            .enumerate()
-            .with_min_len(ROWS_PER_TASK)
-            .for_each(|(i, rrow)| {
-                for (j, rv) in rrow.iter_mut().enumerate() {
-                    let k = i * nx + j;
-                    if !self.active[k] {
-                        *rv = b[k] - self.d[k] * x[k];
-                        continue;
-                    }
-                    // From the faces and the reservoir conductance, not the rounded
-                    // diagonal: a face below ε d_k is part of the residual too.
-                    let mut acc = Compensated::new(b[k]);
-                    acc.add_product(-self.dir[k], x[k]);
-                    self.for_each_face(k, |l, c| {
-                        acc.add_product(-c, x[k]);
-                        acc.add_product(c, x[l]);
-                    });
-                    *rv = acc.value();
-                }
-            });
+        self.residual_of_parts(&[x], b, r);
     }
-}
 
-impl Stencil {
     /// `r = b − A (hi + lo)` for a solution carried as two doubles, summed like
     /// [`Stencil::residual_compensated`]: what refines `lo` beyond the digits one double holds.
     pub fn residual_split(&self, hi: &[f64], lo: &[f64], b: &[f64], r: &mut [f64]) {
+        self.residual_of_parts(&[hi, lo], b, r);
+    }
+
+    /// `r = b − A Σ parts`, each row summed in double-double arithmetic from the faces and
+    /// the reservoir conductance, not the rounded diagonal: a face below ε d_k is part of the
+    /// residual too.
+    fn residual_of_parts(&self, parts: &[&[f64]], b: &[f64], r: &mut [f64]) {
         let nx = self.nx;
         r.par_chunks_mut(nx)
             .enumerate()
@@ -198,17 +182,20 @@ impl Stencil {
                 for (j, rv) in rrow.iter_mut().enumerate() {
                     let k = i * nx + j;
                     if !self.active[k] {
-                        *rv = b[k] - self.d[k] * (hi[k] + lo[k]);
+                        *rv = b[k] - self.d[k] * parts.iter().map(|x| x[k]).sum::<f64>();
                         continue;
                     }
                     let mut acc = Compensated::new(b[k]);
-                    acc.add_product(-self.dir[k], hi[k]);
-                    acc.add_product(-self.dir[k], lo[k]);
+                    for x in parts {
+                        acc.add_product(-self.dir[k], x[k]);
+                    }
                     self.for_each_face(k, |l, c| {
-                        acc.add_product(-c, hi[k]);
-                        acc.add_product(-c, lo[k]);
-                        acc.add_product(c, hi[l]);
-                        acc.add_product(c, lo[l]);
+                        for x in parts {
+                            acc.add_product(-c, x[k]);
+                        }
+                        for x in parts {
+                            acc.add_product(c, x[l]);
+                        }
                     });
                     *rv = acc.value();
                 }

@@ -156,6 +156,17 @@ class _BadTask(Exception):
     """A task's files that must not be used (the message says why)."""
 
 
+def _read_task_file(path: Path, what: str) -> bytes:
+    """The bytes of one of a task's files, or :class:`_BadTask` saying it is missing or
+    unreadable."""
+    try:
+        return path.read_bytes()
+    except FileNotFoundError:
+        raise _BadTask(f"its {what} {path.name} is missing") from None
+    except OSError as exc:
+        raise _BadTask(f"its {what} {path.name} is unreadable ({exc})") from None
+
+
 def _load_task(out: Path, run_id: str, ps: ParamSet, seed: int) -> list[dict[str, Any]]:
     """The checked table of task ``(ps, seed)``; raises :class:`_BadTask` saying why not.
 
@@ -164,12 +175,7 @@ def _load_task(out: Path, run_id: str, ps: ParamSet, seed: int) -> list[dict[str
     """
     meta_path = _task_json(out, ps.key, seed)
     csv_path = _task_csv(out, ps.key, seed)
-    try:
-        raw_meta = meta_path.read_bytes()
-    except FileNotFoundError:
-        raise _BadTask(f"its metadata file {meta_path.name} is missing") from None
-    except OSError as exc:
-        raise _BadTask(f"its metadata file {meta_path.name} is unreadable ({exc})") from None
+    raw_meta = _read_task_file(meta_path, "metadata file")
     try:
         meta = json.loads(raw_meta.decode("utf-8"))
     except ValueError:  # UnicodeDecodeError and JSONDecodeError alike
@@ -183,12 +189,7 @@ def _load_task(out: Path, run_id: str, ps: ParamSet, seed: int) -> list[dict[str
         raise _BadTask("it belongs to another run (generator or sweep options differ)")
     if meta.get("key") != ps.key or meta.get("seed") != seed or meta.get("params") != ps.params:
         raise _BadTask("it belongs to another task (parameters or seed differ)")
-    try:
-        raw = csv_path.read_bytes()
-    except FileNotFoundError:
-        raise _BadTask(f"its table {csv_path.name} is missing") from None
-    except OSError as exc:
-        raise _BadTask(f"its table {csv_path.name} is unreadable ({exc})") from None
+    raw = _read_task_file(csv_path, "table")
     if hashlib.sha256(raw).hexdigest() != meta.get("csv_sha256"):
         raise _BadTask(f"its table {csv_path.name} does not match its checksum")
     try:
