@@ -82,7 +82,7 @@ def persson_contact_fraction(
     contact stress in full contact (the half-space stress of mode ``q`` is ``E*|q| h_q / 2``).
     Boundary-element simulations find the area proportional to the load with a larger constant,
     ``κ ≈ 2`` (Hyun, Pei, Molinari & Robbins, Phys. Rev. E 70, 026117 (2004); Putignano et al.,
-    Int. J. Solids Struct. 49, 338 (2012); Yastrebov, Anciaux & Molinari, Int. J. Solids
+    J. Mech. Phys. Solids 60, 973 (2012); Yastrebov, Anciaux & Molinari, Int. J. Solids
     Struct. 52, 83 (2015)): Persson's theory underestimates the contact area at small loads by
     roughly 20 %.
 
@@ -235,7 +235,7 @@ def bruggeman_permeability(
     statistically equivalent phases. The estimate always lies between the Wiener bounds, the
     harmonic and the arithmetic mean of the ``k_i``. The approach follows Lorenz & Persson's
     leak-rate theory of seals (B. Lorenz and B. N. J. Persson, Eur. Phys. J. E 31, 159
-    (2010); Persson's effective-medium treatment of the interfacial flow).
+    (2010), "Leak rate of seals: effective-medium theory and comparison with experiment").
 
     The EMA is isotropic: ``k_e`` does not depend on the flow direction or on ``dx``; ``axis``
     and ``dx`` are checked for the same domains as :func:`leakpath.flow` so the two calls are
