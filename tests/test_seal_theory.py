@@ -282,6 +282,17 @@ def test_estimate_with_closed_patches():
     )
 
 
+@pytest.mark.filterwarnings("error")
+def test_estimate_over_three_hundred_decades():
+    # 2(ε − K)/(ε + K) + (1 − K)/(1 + K) = 0 has K = 3ε (1 + O(ε)): no underflow on the way.
+    k = np.array([1e-300, 1e-300, 1.0])
+    est = effective_permeability(k)
+    assert est.value == pytest.approx(3e-300, rel=1e-12)
+    assert est.harmonic == pytest.approx(1.5e-300, rel=1e-12)
+    assert est.geometric == pytest.approx(1e-200, rel=1e-12)
+    assert 0 < est.low <= est.value <= est.high <= 1.0
+
+
 def test_estimate_from_one_realisation_has_no_interval():
     est = effective_permeability([2e-18])
     assert est.value == 2e-18 and math.isnan(est.low) and math.isnan(est.high)

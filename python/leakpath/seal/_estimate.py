@@ -202,9 +202,9 @@ def effective_permeability(
     if n_leaking < n:
         harmonic = geometric = 0.0
     else:
-        scale = float(ka.max())
-        harmonic = float(n / np.sum(scale / ka)) * scale
-        geometric = float(np.exp(np.mean(np.log(ka / scale)))) * scale
+        small = float(ka.min())  # k_min/k <= 1: no overflow
+        harmonic = float(n / np.sum(small / ka)) * small
+        geometric = float(np.exp(np.mean(np.log(ka))))
     value = float(_self_consistent(ka)[0])
     # Rounding can put the root a few ulps outside the bounds it provably lies between.
     value = min(max(value, harmonic), arithmetic)

@@ -157,8 +157,10 @@ def _bruggeman_rows(k: FloatArray, weights: FloatArray | None = None) -> FloatAr
     zero = k == 0
     f0 = w[:, zero].sum(axis=1) / total
     inv = np.zeros_like(k)
-    inv[~zero] = 1.0 / k[~zero]
-    h = (w * inv).sum(axis=1) / total
+    with np.errstate(over="ignore"):
+        inv[~zero] = 1.0 / k[~zero]  # inf for a subnormal k: the lower bracket falls to its floor
+    with np.errstate(invalid="ignore"):
+        h = (w * inv).sum(axis=1) / total
     present = w > 0
     kmax = np.where(present, k, -np.inf).max(axis=1)
     kmin = np.where(present, k, np.inf).min(axis=1)
@@ -184,7 +186,7 @@ def _bruggeman_rows(k: FloatArray, weights: FloatArray | None = None) -> FloatAr
         wide = hi > 2.0 * lo
         if not wide.any():
             break
-        mid = np.sqrt(lo * hi)
+        mid = np.sqrt(lo) * np.sqrt(hi)  # lo·hi may underflow
         fm = f(mid)
         up = wide & (fm > 0)
         down = wide & ~(fm > 0)
@@ -198,7 +200,8 @@ def _bruggeman_rows(k: FloatArray, weights: FloatArray | None = None) -> FloatAr
             break
         xa = x[idx][:, None]
         val = (ws[idx] * ((k - xa) / (k + xa))).sum(axis=1) / tot[idx]
-        der = -2.0 * (ws[idx] * (k / (k + xa) ** 2)).sum(axis=1) / tot[idx]
+        # k/(k + x)² as (k/(k + x))/(k + x): the square of a tiny k + x underflows.
+        der = -2.0 * (ws[idx] * ((k / (k + xa)) / (k + xa))).sum(axis=1) / tot[idx]
         step = np.where(val > 0, -val / der, 0.0)
         new = np.minimum(x[idx] + step, hi[idx])
         done = ~(step > 1e-15 * x[idx]) | (new <= x[idx])
