@@ -405,6 +405,13 @@ class SealConfig:
             chk = replace(chk, realisations=0)  # measured files cannot be refined
         set_(self, "check", replace(chk, realisations=min(chk.realisations, self.realisations)))
         set_(self, "strict", _boolean("strict", self.strict))
+        # The bodies module's own checks (e.g. a statistical body needs short_wavelength),
+        # with the config keys in their messages.
+        from . import _bodies
+        from ._run import _roughness
+
+        for side in ("upper", "lower"):
+            _roughness(_bodies, getattr(self, side), f"surface.{side}")
 
     # ------------------------------------------------------------------ derived
     @property

@@ -30,7 +30,8 @@ UNIT_SUFFIXES = ("_m3_per_s", "_kg_per_s", "_m3", "_Pa", "_m", "_s")
 DIMENSIONLESS = frozenset({
     "realisation", "axis", "contact_fraction", "contact_fraction_std",
     "persson_contact_fraction", "percolates", "leaks", "leak_fraction", "n_realisations",
-    "n_leaking", "contact_iterations", "grid_check_relative_change", "converged", "refine",
+    "n_leaking", "n_patches", "contact_iterations", "grid_check_relative_change", "converged",
+    "refine",
 })
 
 

@@ -126,6 +126,7 @@ def _run_task(task: _Task) -> _Output:
         contact = state.contact
         gap = np.where(contact, 0.0, np.clip(state.gap, 0.0, None))
         persson = float(theory.persson_contact_fraction(p, task.e_star, task.rms_slope))
+        bruggeman = float(theory.bruggeman_permeability(gap, surface.dx, contact=contact))
         for axis in task.axes:
             flow = state.flow(axis=axis, viscosity=1.0, pressure_drop=1.0)
             k = float(flow.permeability)
@@ -140,9 +141,7 @@ def _run_task(task: _Task) -> _Output:
                 "percolates": bool(state.percolation(axis=axis).percolates),
                 "leaks": bool(k > 0.0),
                 "permeability_m3": k,
-                "permeability_bruggeman_m3": float(
-                    theory.bruggeman_permeability(gap, surface.dx, axis=axis)
-                ),
+                "permeability_bruggeman_m3": bruggeman,
                 "contact_iterations": int(state.iterations),
             })
     info = {
@@ -334,22 +333,27 @@ def _prepare_out(out: Path, resume: bool, overwrite: bool) -> tuple[OutputRecord
 
 
 # ============================================================================ conversion
-def _roughness(bodies: Any, b: BodySurface) -> Any:
-    """The bodies module's ``Roughness`` of one configured body."""
+def _roughness(bodies: Any, b: BodySurface, name: str) -> Any:
+    """The bodies module's ``Roughness`` of one configured body (errors name ``name.key``)."""
     if b.flat:
-        return bodies.Roughness.smooth()
+        return bodies.Roughness.smooth(name)
     if b.files is not None:
-        return bodies.Roughness(files=b.files, dx=b.dx)
+        return bodies.Roughness(files=b.files, dx=b.dx, name=name)
     psd = None
     if b.psd is not None:
-        table = np.loadtxt(b.psd, ndmin=2)
+        try:
+            table = np.loadtxt(b.psd, ndmin=2)
+        except ValueError as exc:
+            raise InvalidArgumentError(f"{name}.psd: cannot read {b.psd!r} ({exc})",
+                                       argument=f"{name}.psd") from None
         if table.shape[1] != 2:
-            raise InvalidArgumentError(f"psd: {b.psd!r} needs two columns, q [rad/m] and "
-                                       "C [m^4]", argument="psd")
+            raise InvalidArgumentError(f"{name}.psd: {b.psd!r} needs two columns, q [rad/m] "
+                                       "and C [m^4]", argument=f"{name}.psd")
         psd = (table[:, 0].copy(), table[:, 1].copy())
     return bodies.Roughness(
         hurst=b.hurst, rms_height=b.rms_height, rms_slope=b.rms_slope,
         rolloff_wavelength=b.rolloff_wavelength, short_wavelength=b.short_wavelength, psd=psd,
+        name=name,
     )
 
 
@@ -384,18 +388,19 @@ def _aggregate(cfg: SealConfig, estimate: Any, rows: list[dict[str, Any]],
     n_real = cfg.realisations
     for p in cfg.mean_pressure:
         sel = [r for r in rows if r["mean_pressure_Pa"] == p]
-        # K of each patch: the mean of its two diagonal permeabilities (one axis: that one)
-        k_patch = np.zeros(n_real)
-        k_bru = np.zeros(n_real)
-        frac = np.zeros(n_real)
-        gap = np.zeros(n_real)
-        for r in sel:
-            k_patch[r["realisation"]] += r["permeability_m3"] / len(cfg.axes)
-            k_bru[r["realisation"]] += r["permeability_bruggeman_m3"] / len(cfg.axes)
-            frac[r["realisation"]] = r["contact_fraction"]
-            gap[r["realisation"]] = r["mean_gap_m"]
-        est = estimate.effective_permeability(k_patch)
-        bru = estimate.effective_permeability(k_bru)
+        # Both flow axes are samples of the same K (an isotropic surface), pooled; the
+        # bootstrap resamples whole realisations (groups), since the two axes of one patch
+        # are not independent.
+        k = np.array([r["permeability_m3"] for r in sel])
+        groups = np.array([r["realisation"] for r in sel])
+        frac = np.array([r["contact_fraction"] for r in sel if r["axis"] == cfg.axes[0]])
+        gap = np.array([r["mean_gap_m"] for r in sel if r["axis"] == cfg.axes[0]])
+        # The effective medium of the realisations' gap fields: the mean of the patch EMAs
+        # (identically distributed patches; the EMA does not depend on the axis).
+        k_bru = np.array([r["permeability_bruggeman_m3"] for r in sel
+                          if r["axis"] == cfg.axes[0]])
+        est = estimate.effective_permeability(k, groups=groups if len(cfg.axes) > 1 else None)
+        bru_value = float(k_bru.mean())
         row: dict[str, Any] = {
             "mean_pressure_Pa": float(p),
             "n_realisations": n_real,
@@ -414,13 +419,14 @@ def _aggregate(cfg: SealConfig, estimate: Any, rows: list[dict[str, Any]],
             ka = np.array([r["permeability_m3"] for r in sel if r["axis"] == axis])
             row[f"permeability_axis{axis}_m3"] = float(estimate.effective_permeability(ka).value)
         row.update({
+            "n_patches": int(est.n),
             "n_leaking": int(est.n_leaking),
             "leak_fraction": float(est.leak_fraction),
             stem + unit: rate(est.value),
             stem + "_low" + unit: rate(est.low),
             stem + "_high" + unit: rate(est.high),
-            "permeability_bruggeman_m3": float(bru.value),
-            stem + "_bruggeman" + unit: rate(bru.value),
+            "permeability_bruggeman_m3": bru_value,
+            stem + "_bruggeman" + unit: rate(bru_value),
         })
         method = str(est.method)
         change = math.nan
@@ -493,10 +499,11 @@ def seal_leakage(
     t_start = time.perf_counter()
     cfg = as_config(config)
     bodies, _theory, estimate = _modules()
-    upper, lower = _roughness(bodies, cfg.upper), _roughness(bodies, cfg.lower)
+    upper = _roughness(bodies, cfg.upper, "surface.upper")
+    lower = _roughness(bodies, cfg.lower, "surface.lower")
     e_star = float(bodies.contact_modulus_pair(
-        bodies.Material(cfg.upper_material.E, cfg.upper_material.nu),
-        bodies.Material(cfg.lower_material.E, cfg.lower_material.nu),
+        bodies.Material(cfg.upper_material.E, cfg.upper_material.nu, name="material.upper"),
+        bodies.Material(cfg.lower_material.E, cfg.lower_material.nu, name="material.lower"),
     ))
     patch = bodies.choose_patch(upper, lower, n=cfg.n, length=cfg.length)
     messages = list(bodies.validity_warnings(upper, lower, patch))
@@ -505,7 +512,7 @@ def seal_leakage(
                                    + " (refused because strict = true)", argument="surface")
     for m in messages:
         warnings.warn(m, SealValidityWarning, stacklevel=2)
-    rms_slope = float(bodies.composite_rms_slope(upper, lower))
+    rms_slope = float(bodies.composite_rms_slope(upper, lower, length=patch.length))
 
     if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int)
                                 or workers < 1):
@@ -620,8 +627,10 @@ def seal_leakage(
                   "rule": patch.rule},
         "validity_warnings": messages,
         "estimator": {
-            "per_patch_permeability": "mean of K along the flow axes run (an isotropic "
-                                      "surface: both are samples of the same K)",
+            "pooling": "K of both flow axes pooled (an isotropic surface: both are samples "
+                       "of the same K), bootstrap resampling whole realisations",
+            "bruggeman": "mean over realisations of the effective-medium K of each patch's "
+                         "gap field",
             "method": method,
         },
         "surfaces": [{"realisation": t.realisation, "kind": t.kind, "refine": t.refine,
