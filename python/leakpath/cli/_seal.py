@@ -44,7 +44,7 @@ def format_seal_summary(result: Any) -> str:
     stem, unit = ("mass_flow", "kg/s") if gas else ("leak_rate", "m3/s")
     suffix = "_kg_per_s" if gas else "_m3_per_s"
     header = ["p_nominal", "contact A/A0", "Persson A/A0", "K_eff", "K_eff 95% interval",
-              "leaking", "mass flow" if gas else "leak rate Q", "Q interval",
+              "leaking patches", "mass flow" if gas else "leak rate Q", "Q interval",
               "Q Bruggeman", "grid check dK/K"]
     body = []
     for r in s.rows():
@@ -57,7 +57,7 @@ def format_seal_summary(result: Any) -> str:
             f"{r['persson_contact_fraction']:.3f}",
             _num(r["permeability_m3"], "m3"),
             f"[{r['permeability_low_m3']:.3g}, {r['permeability_high_m3']:.3g}] m3",
-            f"{r['n_leaking']}/{r['n_realisations']}",
+            f"{r['n_leaking']}/{r['n_patches']}",
             _num(r[stem + suffix], unit),
             f"[{r[stem + '_low' + suffix]:.3g}, {r[stem + '_high' + suffix]:.3g}] {unit}",
             _num(r[stem + "_bruggeman" + suffix], unit),

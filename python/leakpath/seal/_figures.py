@@ -48,13 +48,21 @@ def seal_figure(result: Any) -> Any:
     ax1.plot(p, q, "o-", color="tab:blue", label="simulation, K_eff")
     ax1.plot(p, qb, "s--", color="tab:orange", label="Bruggeman (effective medium)")
     ax1.set_xscale("log")
-    if np.any(np.isfinite(np.r_[q, hi, qb])):
+    finite = np.r_[q, lo, hi, qb]
+    finite = finite[np.isfinite(finite)]
+    if finite.size:
         ax1.set_yscale("log")
+        zero = s.column(stem + unit) == 0
+        if np.any(zero):  # K_eff = 0: no leak path at the patch scale
+            bottom = finite.min() / 30
+            ax1.plot(p[zero], np.full(int(zero.sum()), bottom), "v", color="tab:blue",
+                     markerfacecolor="none", label="K_eff = 0 (drawn at the bottom)")
+            ax1.set_ylim(bottom=bottom / 2)
     ax1.set_xlabel("nominal contact pressure p̄ [Pa]")
     ax1.set_ylabel(label)
     ax1.set_title("seal leak rate" + (f"\n{conf}" if conf and len(conf) < 60 else ""),
                   fontsize=10)
-    ax1.legend(fontsize=8)
+    ax1.legend(fontsize=7)
 
     a = s.column("contact_fraction")
     da = s.column("contact_fraction_std")
@@ -97,6 +105,7 @@ def seal_figure(result: Any) -> Any:
     ax3.set_xscale("log")
     if kpos.size:
         ax3.set_yscale("log")
+        ax3.set_ylim(bottom=floor / 3)
     ax3.set_xlabel("nominal contact pressure p̄ [Pa]")
     ax3.set_ylabel("patch permeability K [m³]")
     ax3.set_title("distribution of K (0 = patch does not leak)", fontsize=10)
