@@ -47,6 +47,7 @@ def main() -> int:
         args.out.mkdir(parents=True, exist_ok=True)
         config.write_text(_toml(cfg.to_dict()), encoding="utf-8")
     env = {**os.environ, "PYTHONPATH": str(ROOT / "python")}
+    load_before = os.getloadavg()
     local = args.out / "processes"
     t0 = time.perf_counter()
     proc = subprocess.run(
@@ -73,6 +74,7 @@ def main() -> int:
     print(f"local processes: {wall_local:.1f} s; Dask LocalCluster: {wall_dask:.1f} s; "
           f"identical: {same}")
 
+    load_after = os.getloadavg()
     info = machine_info()
     cfg = result.config
     label = "without" if args.no_check else "with"
@@ -89,6 +91,8 @@ def main() -> int:
         f"{(info['memory_bytes'] or 0) / 2**30:.1f} GiB; {info['platform']}",
         f"- versions: leakpath {info['leakpath']}, Python {info['python']}, numpy "
         f"{info['numpy']}, dask.distributed {_dask_version()}",
+        f"- load average (1, 5, 15 min) before: {_load(load_before)}, after: "
+        f"{_load(load_after)} (other work on the machine slows both runs)",
         f"- wall time, local processes (CLI, 2 workers × 1 thread): **{wall_local:.1f} s**",
         f"- wall time, Dask LocalCluster (2 workers × 1 thread): **{wall_dask:.1f} s**",
         f"- tables identical between the two: {', '.join(f'{n}: {v}' for n, v in same.items())}",
@@ -111,6 +115,10 @@ def main() -> int:
         old = before + (("## " + rest[1]) if len(rest) > 1 else "")
     args.results.write_text(old.rstrip() + "\n\n" + text, encoding="utf-8")
     return 0 if all(same.values()) else 1
+
+
+def _load(avg: tuple[float, float, float]) -> str:
+    return ", ".join(f"{x:.2f}" for x in avg)
 
 
 def _dask_version() -> str:

@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 import math
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -507,3 +508,20 @@ def test_cli_seal(tmp_path, capsys):
     assert main(["seal", str(bad), "--out", str(tmp_path / "b")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("leakpath: error: load.mean_pressure:")
+
+
+def test_worked_example_config():
+    """The README's example: the patch rule gives 512² points of 1 µm, E* by hand, no
+    validity warning (rms slope ≈ 0.15)."""
+    from leakpath.seal import _bodies
+    from leakpath.seal._config import _roughness
+
+    root = Path(__file__).resolve().parents[1]
+    cfg = SealConfig.from_toml(root / "examples" / "seal_water.toml")
+    assert cfg.realisations == 16 and len(cfg.mean_pressure) == 6 and cfg.axes == (0, 1)
+    assert cfg.mean_pressure[0] == 1e5 and cfg.mean_pressure[-1] == 1e6
+    upper = _roughness(_bodies, cfg.upper, "surface.upper")
+    lower = _roughness(_bodies, cfg.lower, "surface.lower")
+    patch = _bodies.choose_patch(upper, lower)
+    assert (patch.n, patch.dx) == (512, pytest.approx(1e-6, rel=1e-12))
+    assert _bodies.validity_warnings(upper, lower, patch) == []

@@ -53,6 +53,8 @@ from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from ..errors import InvalidArgumentError
 
 __all__ = [
@@ -408,7 +410,6 @@ class SealConfig:
         # The bodies module's own checks (e.g. a statistical body needs short_wavelength),
         # with the config keys in their messages.
         from . import _bodies
-        from ._run import _roughness
 
         for side in ("upper", "lower"):
             _roughness(_bodies, getattr(self, side), f"surface.{side}")
@@ -497,6 +498,30 @@ def _resolve(path: Any, base: Path | None, name: str) -> str:
     if base is not None and not p.is_absolute():
         p = base / p
     return os.fspath(p)
+
+
+def _roughness(bodies: Any, b: BodySurface, name: str) -> Any:
+    """The bodies module's ``Roughness`` of one configured body (errors name ``name.key``)."""
+    if b.flat:
+        return bodies.Roughness.smooth(name)
+    if b.files is not None:
+        return bodies.Roughness(files=b.files, dx=b.dx, name=name)
+    psd = None
+    if b.psd is not None:
+        try:
+            table = np.loadtxt(b.psd, ndmin=2)
+        except ValueError as exc:
+            raise InvalidArgumentError(f"{name}.psd: cannot read {b.psd!r} ({exc})",
+                                       argument=f"{name}.psd") from None
+        if table.shape[1] != 2:
+            raise InvalidArgumentError(f"{name}.psd: {b.psd!r} needs two columns, q [rad/m] "
+                                       "and C [m^4]", argument=f"{name}.psd")
+        psd = (table[:, 0].copy(), table[:, 1].copy())
+    return bodies.Roughness(
+        hurst=b.hurst, rms_height=b.rms_height, rms_slope=b.rms_slope,
+        rolloff_wavelength=b.rolloff_wavelength, short_wavelength=b.short_wavelength, psd=psd,
+        name=name,
+    )
 
 
 def _from_dict(data: Mapping[str, Any], base: Path | None) -> SealConfig:

@@ -150,9 +150,10 @@ class SealResult:
         rate = self.summary.column(self.rate_column)
         unit = "kg/s" if self.gas else "m³/s"
         p = self.summary.column("mean_pressure_Pa")
+        what = "mass flow" if self.gas else "leak rate"
         return (
             f"SealResult({cfg.realisations} realisations × {len(p)} pressures × "
-            f"{len(cfg.axes)} axes; {self.rate_column.split('_')[0]} {rate[0]:.3g} {unit} at "
+            f"{len(cfg.axes)} axes; {what} {rate[0]:.3g} {unit} at "
             f"{p[0]:.3g} Pa … {rate[-1]:.3g} {unit} at {p[-1]:.3g} Pa"
             f"{'' if self.converged else '; convergence check FAILED'})"
         )

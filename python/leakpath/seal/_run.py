@@ -42,7 +42,7 @@ from .._checkpoint import _differences, _record_digest
 from .._io import atomic_write_text, dumps, heights_sha256, machine_info
 from .._outputs import OutputRecord, is_temporary
 from ..errors import InvalidArgumentError
-from ._config import UNITS, BodySurface, SealConfig, as_config
+from ._config import UNITS, SealConfig, _roughness, as_config
 from ._result import SealResult, Table
 
 __all__ = ["seal_leakage", "SealValidityWarning", "SealConvergenceWarning"]
@@ -333,30 +333,6 @@ def _prepare_out(out: Path, resume: bool, overwrite: bool) -> tuple[OutputRecord
 
 
 # ============================================================================ conversion
-def _roughness(bodies: Any, b: BodySurface, name: str) -> Any:
-    """The bodies module's ``Roughness`` of one configured body (errors name ``name.key``)."""
-    if b.flat:
-        return bodies.Roughness.smooth(name)
-    if b.files is not None:
-        return bodies.Roughness(files=b.files, dx=b.dx, name=name)
-    psd = None
-    if b.psd is not None:
-        try:
-            table = np.loadtxt(b.psd, ndmin=2)
-        except ValueError as exc:
-            raise InvalidArgumentError(f"{name}.psd: cannot read {b.psd!r} ({exc})",
-                                       argument=f"{name}.psd") from None
-        if table.shape[1] != 2:
-            raise InvalidArgumentError(f"{name}.psd: {b.psd!r} needs two columns, q [rad/m] "
-                                       "and C [m^4]", argument=f"{name}.psd")
-        psd = (table[:, 0].copy(), table[:, 1].copy())
-    return bodies.Roughness(
-        hurst=b.hurst, rms_height=b.rms_height, rms_slope=b.rms_slope,
-        rolloff_wavelength=b.rolloff_wavelength, short_wavelength=b.short_wavelength, psd=psd,
-        name=name,
-    )
-
-
 def _file_hashes(cfg: SealConfig) -> dict[str, str]:
     out = {}
     for b in (cfg.upper, cfg.lower):
