@@ -252,16 +252,20 @@ def test_bad_config_keys_are_named(path, value, name):
     assert str(info.value).startswith(name + ":")
 
 
-def test_validity_warning_or_strict_refusal(monkeypatch):
-    from leakpath.seal import _bodies
-
-    monkeypatch.setattr(_bodies, "validity_warnings", lambda u, lo, p: ["rms slope 0.5 > 0.3"])
-    with pytest.warns(SealValidityWarning, match="rms slope 0.5"):
+def test_validity_warning_or_strict_refusal():
+    """16 points on the 0.4 mm patch: dx = 25 µm resolves the 50 µm cutoff by 2 points."""
+    cfg = base_config(check={"realisations": 0})
+    cfg["surface"]["n"] = 16
+    with pytest.warns(SealValidityWarning, match="resolved by 2 grid points"):
+        res = leakpath.seal_leakage(cfg, workers=1, progress=False)
+    assert res.metadata["validity_warnings"]
+    with pytest.raises(InvalidArgumentError, match="strict = true") as info:
+        leakpath.seal_leakage({**cfg, "strict": True}, workers=1, progress=False)
+    assert info.value.argument == "surface"
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", SealValidityWarning)  # the 32² default is valid
         leakpath.seal_leakage(base_config(check={"realisations": 0}), workers=1,
                               progress=False)
-    with pytest.raises(InvalidArgumentError, match="strict") as info:
-        leakpath.seal_leakage({**base_config(), "strict": True}, workers=1, progress=False)
-    assert info.value.argument == "surface"
 
 
 # ---------------------------------------------------------------- the numbers
