@@ -467,7 +467,10 @@ def test_processes_serial_and_dask_give_identical_tables(reference, tmp_path):
         distributed.Client(cluster) as client,
     ):
         dask = run(base_config(), out=tmp_path / "d", scheduler=client, workers=None)
+        address = run(base_config(check={"realisations": 0}), scheduler=cluster.scheduler_address,
+                      workers=None)
     assert dask.metadata["run"]["executor"] == "dask"
+    assert address.realisations.csv_text() == ref.realisations.csv_text()
     for name in ("summary.csv", "realisations.csv", "check.csv"):
         want = (ref_dir / name).read_bytes()
         assert (tmp_path / "p" / name).read_bytes() == want, name

@@ -497,22 +497,14 @@ def seal_leakage(
     if scheduler is not None and workers is not None:
         raise InvalidArgumentError("workers: sizes local processes; size a Dask cluster "
                                    "itself", argument="workers")
-    client, own_client = None, None
-    if scheduler is not None:
-        from ..ensemble._executors import _dask_client, _is_dask_client
+    from ..ensemble._executors import _cpus, _dask_client, _is_dask_client
 
-        if _is_dask_client(scheduler):
-            client = scheduler
-        elif isinstance(scheduler, str):
-            own_client = client = _dask_client(scheduler)
-        else:
-            raise InvalidArgumentError("scheduler: expected a dask.distributed Client or an "
-                                       f"address, got {type(scheduler).__name__}",
-                                       argument="scheduler")
-    from ..ensemble._executors import _cpus
-
+    if scheduler is not None and not (_is_dask_client(scheduler) or isinstance(scheduler, str)):
+        raise InvalidArgumentError("scheduler: expected a dask.distributed Client or an "
+                                   f"address, got {type(scheduler).__name__}",
+                                   argument="scheduler")
     n_workers = workers or _cpus()
-    mode = "dask" if client is not None else ("serial" if n_workers == 1 else "processes")
+    mode = "dask" if scheduler is not None else ("serial" if n_workers == 1 else "processes")
 
     common = dict(upper=upper, lower=lower, patch=patch, seed=cfg.seed,
                   pressures=cfg.mean_pressure, axes=cfg.axes, e_star=e_star,
@@ -564,7 +556,13 @@ def seal_leakage(
             raise KeyboardInterrupt("stopped after the requested number of realisations")
 
     t_run = time.perf_counter()
+    # A scheduler address is connected to only now: an unreachable one leaves the output
+    # directory with its manifest alone, ready for --resume.
+    own_client = None
     try:
+        if isinstance(scheduler, str) and todo:
+            own_client = _dask_client(scheduler)
+        client = own_client if own_client is not None else scheduler
         info = _execute(todo, mode, client, n_workers, done)
     finally:
         if bar is not None:
