@@ -349,7 +349,7 @@ class Roughness:
 class _PowerLaw:
     """Piecewise power-law PSD: ``C`` log-log linear between ``nodes``; flat at ``c[0]`` from
     ``floor`` to ``q[0]`` (``floor = 0``: a roll-off; ``floor = q[0]``: nothing below), zero
-    above ``q[-1]``. ``scale`` multiplies ``c``."""
+    above ``q[-1]``."""
 
     q: FloatArray
     c: FloatArray
@@ -433,34 +433,36 @@ def _load_body(r: Roughness, k: int) -> Surface:
 
 def _periodogram_psd(r: Roughness) -> tuple[PSD, float, float]:
     """Radially averaged periodogram of a body's files (averaged over files), its m0 [m²]
-    and FD mean-square slope, measured from the data."""
-    bins: dict[int, list[float]] = {}
+    and FD mean-square slope, measured from the data.
+
+    Mode k of a mean-subtracted ``ny × nx`` sample carries the variance
+    ``P_k = |FFT(h)_k|²/(ny nx)²`` (``Σ P_k = m0``). Modes are binned by ``j = round(|q|/Δq)``,
+    ``Δq = 2π/L``; bin j ≥ 1 gets ``C_j = Σ_bin P_k / (2π j Δq²)`` (its variance over the
+    annulus area), so the binned spectrum integrates to the data's m0 less the few modes
+    below ``Δq/2``."""
+    variance: dict[int, float] = {}
     step = None
+    nfiles = len(r.files)  # type: ignore[arg-type]
     m0 = slope2 = 0.0
-    for k in range(len(r.files)):  # type: ignore[arg-type]
+    for k in range(nfiles):
         s = _load_body(r, k)
         h = s.heights
         ny, nx = h.shape
-        p = np.abs(np.fft.fft2(h)) ** 2 / (ny * nx) ** 2  # variance per mode, Σ p = m0
-        dqy, dqx = 2 * math.pi / (ny * s.dx), 2 * math.pi / (nx * s.dx)
+        p = np.abs(np.fft.fft2(h)) ** 2 / (ny * nx) ** 2
         qy = 2 * math.pi * np.fft.fftfreq(ny, s.dx)
         qx = 2 * math.pi * np.fft.fftfreq(nx, s.dx)
         q = np.hypot(qy[:, None], qx[None, :])
-        step = max(dqx, dqy) if step is None else step
+        if step is None:
+            step = 2 * math.pi / (max(ny, nx) * s.dx)
         j = np.rint(q / step).astype(np.int64).ravel()
-        c = (p / (dqx * dqy)).ravel()
-        sums = np.bincount(j, weights=c)
-        counts = np.bincount(j)
-        for i in np.nonzero(counts)[0]:
-            bins.setdefault(int(i), [0.0, 0.0])
-            bins[int(i)][0] += sums[i]
-            bins[int(i)][1] += counts[i]
+        sums = np.bincount(j, weights=p.ravel())
+        for i in np.nonzero(sums)[0]:
+            variance[int(i)] = variance.get(int(i), 0.0) + float(sums[i])
         m0 += float(np.mean(h * h))
         slope2 += _fd_rms_slope(h, s.dx) ** 2 if min(ny, nx) >= 2 else 0.0
-    nfiles = len(r.files)  # type: ignore[arg-type]
-    idx = np.array(sorted(i for i in bins if i > 0))
+    idx = np.array(sorted(i for i in variance if i > 0), dtype=np.int64)
     qb = idx * step
-    cb = np.array([bins[int(i)][0] / bins[int(i)][1] for i in idx])
+    cb = np.array([variance[int(i)] / nfiles / (2 * math.pi * i * step**2) for i in idx])
     keep = cb > 0
     law = _PowerLaw(qb[keep], cb[keep], 0.0) if np.count_nonzero(keep) >= 2 else None
 
@@ -553,6 +555,17 @@ class Patch:
     length: float
     dx: float
     rule: str
+
+    def __post_init__(self) -> None:
+        n = _validate.integer("patch.n", self.n, low=2)
+        length = _validate.positive("patch.length", self.length, what="a positive side in m")
+        dx = _validate.spacing("patch.dx", self.dx)
+        if not math.isclose(dx * n, length, rel_tol=1e-9):
+            raise _fail("patch.dx", f"{dx!r} m must equal length/n = {length / n!r} m")
+        object.__setattr__(self, "n", n)
+        object.__setattr__(self, "length", length)
+        object.__setattr__(self, "dx", dx)
+        object.__setattr__(self, "rule", str(self.rule))
 
 
 def _scales(r: Roughness) -> tuple[float | None, float | None]:
