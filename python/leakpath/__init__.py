@@ -18,6 +18,7 @@ from .contact import ContactProblem, ContactState, solve
 from .elastic import kernel_table
 from .generators import rmd, spectral
 from .moments import Moments, nayak_moments, rms_height, rms_slope
+from .seal import SealConfig, SealResult, seal_leakage
 from .surfaces import Surface, load
 from .threshold import PercolationThreshold, percolation_threshold
 
@@ -30,11 +31,14 @@ __all__ = [
     "Moments",
     "Percolation",
     "PercolationThreshold",
+    "SealConfig",
+    "SealResult",
     "SweepResult",
     "flow",
     "label",
     "percolation",
     "percolation_threshold",
+    "seal_leakage",
     "sweep",
     "rms_height",
     "rms_slope",

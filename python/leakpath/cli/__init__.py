@@ -21,7 +21,8 @@ on the command line) adds the traceback. No traceback is shown otherwise. ``--js
 is strict JSON: non-finite numbers are written as ``null``.
 
 Modules: ``_common`` (errors, formatting, argument types), one module per command
-(``_surface``, ``_sweep`` for ``paper``/``sweep``, ``_flow``, ``_ensemble``); this module builds
+(``_surface``, ``_sweep`` for ``paper``/``sweep``, ``_flow``, ``_ensemble``,
+``_seal``); this module builds
 the parser and dispatches.
 """
 
@@ -49,6 +50,7 @@ from ._common import (
 )
 from ._ensemble import _add_ensemble_parser
 from ._flow import _add_flow_parser
+from ._seal import _add_seal_parser
 from ._surface import _add_surface_parser
 from ._sweep import _add_paper_parser, _add_sweep_parser
 
@@ -80,6 +82,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_sweep_parser(subparsers)
     _add_ensemble_parser(subparsers)
     _add_flow_parser(subparsers)
+    _add_seal_parser(subparsers)
     _add_debug_flags(parser)
     return parser
 
