@@ -2,7 +2,7 @@
 //! flat, and the connectivity of the free region between them.
 //!
 //! Pure Rust; the PyO3 bindings live in `python/` only (one file per area), behind the `python` feature
-//! (default), so `cargo build --no-default-features` has no pyo3 or numpy.
+//! (off by default; maturin turns it on), so `cargo build` and `cargo test` have no pyo3 or numpy.
 
 pub mod alloc;
 pub mod clusters;
