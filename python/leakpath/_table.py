@@ -199,6 +199,31 @@ class SweepResult:
     def __len__(self) -> int:
         return len(self.rows)
 
+    def __repr__(self) -> str:
+        # The rows, fields and masks are tables and grids: summarise them in two lines.
+        ny, nx = self.surface.shape
+        unit = self.surface.metadata.get("unit", self.surface.metadata.get("length_unit"))
+        u = f" {unit}" if unit else ""
+        head = (
+            f"SweepResult({len(self.rows)} levels on a {ny}x{nx} surface, "
+            f"dx={self.surface.dx:.6g}{u}, boundary={self.parameters.get('boundary')!r}, "
+            f"axis={self.parameters.get('axis', 0)!r}"
+        )
+        if not self.rows:
+            return head + ")"
+
+        def span(name: str, fmt: str = ".4g") -> str:
+            col = self.column(name)
+            return f"{col[0]:{fmt}} … {col[-1]:{fmt}}"
+
+        has_flow = bool(np.isfinite(self.column("K")).any())
+        return (
+            f"{head},\n  approach {span('approach')}{u}, contact_fraction "
+            f"{span('contact_fraction')}, V_pg* {span('V_pg_star')}"
+            + (f", K* {span('K_star')}" if has_flow else ", no leak-rate columns")
+            + f", {self.total_seconds:.3g} s)"
+        )
+
     @property
     def columns(self) -> tuple[str, ...]:
         """Column names in CSV order."""
