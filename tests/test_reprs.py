@@ -67,6 +67,21 @@ def test_contact_state(state: leakpath.ContactState) -> None:
     assert f"solver={state.solver!r}" in text
 
 
+@pytest.mark.parametrize(
+    ("pressure", "shown"),
+    [("abc", "pressure=str"), (np.full((33, 33), "x"), "ndarray of shape (33, 33)"),
+     (np.zeros((3, 3)), "3x3 grid")],
+)
+def test_contact_state_with_malformed_fields(
+    state: leakpath.ContactState, pressure: Any, shown: str
+) -> None:
+    # Error messages describe a refused warm start by its repr: it must not raise.
+    import dataclasses
+
+    text = check_short(dataclasses.replace(state, pressure=pressure), "ContactState")
+    assert shown in text
+
+
 def test_percolation(state: leakpath.ContactState) -> None:
     perc = state.percolation()
     text = check_short(perc, "Percolation")

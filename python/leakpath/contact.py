@@ -110,14 +110,21 @@ class ContactState:
 
     def __repr__(self) -> str:
         # One line of scalars: the fields are grids, shown by their shape only.
-        ny, nx = self.shape
-        return (
-            f"ContactState({ny}x{nx} grid, approach={self.approach:.6g}, "
-            f"contact_fraction={self.contact_fraction:.4g}, "
-            f"mean_pressure={self.mean_pressure:.4g}, mean_gap={self.mean_gap:.4g}, "
-            f"solver={self.solver!r}, iterations={self.iterations}, kkt={self.kkt:.1e}, "
-            f"seconds={self.seconds:.3g})"
-        )
+        try:
+            ny, nx = self.shape
+            return (
+                f"ContactState({ny}x{nx} grid, approach={self.approach:.6g}, "
+                f"contact_fraction={self.contact_fraction:.4g}, "
+                f"mean_pressure={self.mean_pressure:.4g}, mean_gap={self.mean_gap:.4g}, "
+                f"solver={self.solver!r}, iterations={self.iterations}, kkt={self.kkt:.1e}, "
+                f"seconds={self.seconds:.3g})"
+            )
+        except Exception:  # malformed fields (a hand-built state refused as a warm start)
+            return (
+                f"ContactState(approach={_validate.describe(self.approach, 40)}, "
+                f"pressure={type(self.pressure).__name__} of shape "
+                f"{getattr(self.pressure, 'shape', '?')})"
+            )
 
     @property
     def shape(self) -> tuple[int, int]:
