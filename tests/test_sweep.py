@@ -258,7 +258,10 @@ def check_figures(directory) -> None:
 
 def test_plots_write_png_and_pdf_without_pyplot(tmp_path, result):
     paths = result.plot(tmp_path / "figs", levels_to_map=[0, LEVELS])
-    assert len(paths) == 2 * 5
+    # Figs. 1-3, two class maps, the leak-rate figure and the last leaking row's flux map.
+    leaking = [k for k, r in enumerate(result.rows) if r["Q"] > 0]
+    assert {p.stem for p in paths} >= {"fig4_leak_rate", f"flux_k{leaking[-1]:02d}"}
+    assert len(paths) == 2 * 7
     check_figures(tmp_path / "figs")
     if "matplotlib.pyplot" in sys.modules:
         import matplotlib.pyplot as plt
@@ -266,6 +269,66 @@ def test_plots_write_png_and_pdf_without_pyplot(tmp_path, result):
         assert plt.get_fignums() == []
     with pytest.raises(ValueError, match="levels_to_map"):
         result.plot(tmp_path / "x", levels_to_map=[LEVELS + 1])
+
+
+def test_plot_without_a_directory_returns_figures_and_writes_nothing(
+    tmp_path, monkeypatch, result
+):
+    from matplotlib.figure import Figure
+
+    monkeypatch.chdir(tmp_path)
+    figures = result.plot(levels_to_map=[0, LEVELS], flux_levels=[1, 3])
+    assert list(tmp_path.iterdir()) == []
+    assert list(figures) == [
+        "fig1_topography_moments", "fig2_vpg_volume_gap", "fig3_vpg_moments",
+        "map_k00", f"map_k{LEVELS:02d}", "fig4_leak_rate", "flux_k01", "flux_k03",
+    ]
+    assert all(isinstance(f, Figure) for f in figures.values())
+    # The leak-rate figure draws K* of the leaking rows in each of its three panels.
+    k_star = result.column("K_star")
+    leaking = k_star[np.isfinite(k_star) & (k_star > 0)]
+    panels = figures["fig4_leak_rate"].axes
+    assert len(panels) == 3
+    for ax in panels:
+        np.testing.assert_array_equal(ax.get_lines()[0].get_ydata(), leaking)
+    if "matplotlib.pyplot" in sys.modules:
+        import matplotlib.pyplot as plt
+
+        assert plt.get_fignums() == []
+
+
+def test_plot_default_levels_match_the_written_files(tmp_path, result):
+    figures = result.plot()
+    paths = result.plot(tmp_path, formats=("png",))
+    assert list(figures) == [p.stem for p in paths]
+    assert "fig4_leak_rate" in figures
+
+
+def test_plot_without_flow_columns_has_no_leak_rate_figures(surface):
+    no_flow = sweep(surface, levels=3, solver="active-set", flow=False)
+    figures = no_flow.plot()
+    assert "fig4_leak_rate" not in figures and "fig1_topography_moments" in figures
+    assert not any(name.startswith("flux_") for name in figures)
+    with pytest.raises(ValueError, match="flux_levels"):
+        no_flow.plot(flux_levels=[1])
+
+
+def test_plot_into_a_directory_writes_the_files_of_the_cli(tmp_path, capsys):
+    from leakpath import cli
+
+    out = tmp_path / "cli"
+    assert cli.main(["sweep", "rmd:m=4,D=2.2,seed=2", "--levels", "3", "--flux-maps", "1",
+                     "--out", str(out)]) == 0
+    capsys.readouterr()
+    cli_figures = sorted(p.name for p in (out / "figures").iterdir())
+    assert "fig4_leak_rate.png" in cli_figures and "flux_k01.pdf" in cli_figures
+    same = sweep(rmd(4, 2.2, seed=2), levels=3)
+    written = same.plot(tmp_path / "py", flux_levels=[1])
+    assert sorted(p.name for p in written) == cli_figures
+    assert sorted(p.name for p in (tmp_path / "py").iterdir()) == cli_figures
+    # PNGs carry no date: the same table draws the same bytes.
+    for name in ("fig1_topography_moments.png", "fig4_leak_rate.png"):
+        assert (tmp_path / "py" / name).read_bytes() == (out / "figures" / name).read_bytes()
 
 
 # ---------------------------------------------------------------------------- CLI

@@ -110,6 +110,17 @@ class Percolation:
         """True when at least one cluster spans the grid along the flow direction."""
         return self.n_spanning > 0
 
+    def __repr__(self) -> str:
+        ny, nx = self.shape
+        return (
+            f"Percolation({ny}x{nx} grid, axis={self.axis!r}, "
+            f"connectivity={self.connectivity}, percolates={self.percolates}, "
+            f"clusters={self.n_clusters} (spanning {self.n_spanning}, dead-end "
+            f"{self.n_dead_end}, trapped {self.n_trapped}), V_pg={self.spanning_volume:.4g}, "
+            f"V_dead={self.dead_end_volume:.4g}, V_trapped={self.trapped_volume:.4g}, "
+            f"V={self.free_volume:.4g})"
+        )
+
     @property
     def shape(self) -> tuple[int, int]:
         return self.labels.shape  # type: ignore[return-value]

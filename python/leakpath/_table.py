@@ -13,7 +13,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, overload
 
 import numpy as np
 
@@ -30,6 +30,8 @@ from ._io import (
 )
 
 if TYPE_CHECKING:  # pragma: no cover
+    from matplotlib.figure import Figure
+
     from .surfaces import Surface
 
 __all__ = ["SweepResult", "COLUMNS", "CSV_COLUMNS", "surface_sha256"]
@@ -199,6 +201,31 @@ class SweepResult:
     def __len__(self) -> int:
         return len(self.rows)
 
+    def __repr__(self) -> str:
+        # The rows, fields and masks are tables and grids: summarise them in two lines.
+        ny, nx = self.surface.shape
+        unit = self.surface.metadata.get("unit", self.surface.metadata.get("length_unit"))
+        u = f" {unit}" if unit else ""
+        head = (
+            f"SweepResult({len(self.rows)} levels on a {ny}x{nx} surface, "
+            f"dx={self.surface.dx:.6g}{u}, boundary={self.parameters.get('boundary')!r}, "
+            f"axis={self.parameters.get('axis', 0)!r}"
+        )
+        if not self.rows:
+            return head + ")"
+
+        def span(name: str, fmt: str = ".4g") -> str:
+            col = self.column(name)
+            return f"{col[0]:{fmt}} … {col[-1]:{fmt}}"
+
+        has_flow = bool(np.isfinite(self.column("K")).any())
+        return (
+            f"{head},\n  approach {span('approach')}{u}, contact_fraction "
+            f"{span('contact_fraction')}, V_pg* {span('V_pg_star')}"
+            + (f", K* {span('K_star')}" if has_flow else ", no leak-rate columns")
+            + f", {self.total_seconds:.3g} s)"
+        )
+
     @property
     def columns(self) -> tuple[str, ...]:
         """Column names in CSV order."""
@@ -305,17 +332,56 @@ class SweepResult:
         )
         return atomic_write_bytes(path, buf.getvalue())
 
+    @overload
+    def plot(
+        self,
+        outdir: None = None,
+        formats: Sequence[str] = ...,
+        levels_to_map: Iterable[int] | None = ...,
+        flux_levels: Iterable[int] | None = ...,
+    ) -> dict[str, Figure]: ...
+
+    @overload
     def plot(
         self,
         outdir: PathLike,
+        formats: Sequence[str] = ...,
+        levels_to_map: Iterable[int] | None = ...,
+        flux_levels: Iterable[int] | None = ...,
+    ) -> list[Path]: ...
+
+    def plot(
+        self,
+        outdir: PathLike | None = None,
         formats: Sequence[str] = ("png", "pdf"),
         levels_to_map: Iterable[int] | None = None,
-    ) -> list[Path]:
-        """Write the paper's figures into ``outdir``; see
-        :func:`leakpath.plots.save_paper_figures`."""
-        from .plotting.paper import save_paper_figures
+        flux_levels: Iterable[int] | None = None,
+    ) -> dict[str, Figure] | list[Path]:
+        """The figures of the sweep, every one ``leakpath sweep`` writes: Figs. 1–3, one
+        class map per row in ``levels_to_map`` (default
+        :func:`leakpath.plotting.default_map_levels`) and, when the table has leak-rate
+        columns, ``fig4_leak_rate`` and one flux map per row in ``flux_levels`` (default:
+        the last leaking row).
 
-        return save_paper_figures(self, outdir, formats=formats, levels_to_map=levels_to_map)
+        Without ``outdir`` nothing is written: returns a dict file stem → matplotlib
+        :class:`~matplotlib.figure.Figure` (``"fig1_topography_moments"``, …,
+        ``"map_k05"``, ``"fig4_leak_rate"``, ``"flux_k07"``), which a notebook shows with
+        ``display(fig)``. With ``outdir`` (created) each figure is written there as
+        ``<stem>.<format>`` for every format in ``formats`` ⊆ {"png", "pdf", "svg"},
+        atomically, the same files as the command line's ``figures/``; returns the paths
+        written (see :func:`leakpath.plotting.save_paper_figures` and
+        :func:`leakpath.plotting.save_flow_figures`).
+        """
+        from .plotting.flow import flow_figures, save_flow_figures
+        from .plotting.paper import paper_figures, save_paper_figures
+
+        if outdir is None:
+            return {
+                **paper_figures(self, levels_to_map=levels_to_map),
+                **flow_figures(self, flux_levels=flux_levels),
+            }
+        paths = save_paper_figures(self, outdir, formats=formats, levels_to_map=levels_to_map)
+        return paths + save_flow_figures(self, outdir, formats=formats, flux_levels=flux_levels)
 
 
 _DEFINITIONS = {

@@ -108,6 +108,24 @@ class ContactState:
     #: counts ¼); 0 when there was none.
     coarse_fft_products: float = 0.0
 
+    def __repr__(self) -> str:
+        # One line of scalars: the fields are grids, shown by their shape only.
+        try:
+            ny, nx = self.shape
+            return (
+                f"ContactState({ny}x{nx} grid, approach={self.approach:.6g}, "
+                f"contact_fraction={self.contact_fraction:.4g}, "
+                f"mean_pressure={self.mean_pressure:.4g}, mean_gap={self.mean_gap:.4g}, "
+                f"solver={self.solver!r}, iterations={self.iterations}, kkt={self.kkt:.1e}, "
+                f"seconds={self.seconds:.3g})"
+            )
+        except Exception:  # malformed fields (a hand-built state refused as a warm start)
+            return (
+                f"ContactState(approach={_validate.describe(self.approach, 40)}, "
+                f"pressure={type(self.pressure).__name__} of shape "
+                f"{getattr(self.pressure, 'shape', '?')})"
+            )
+
     @property
     def shape(self) -> tuple[int, int]:
         return self.pressure.shape  # type: ignore[return-value]
@@ -260,6 +278,14 @@ class ContactProblem:
             h, self.surface.dx, self.e_star, boundary, self.memory_limit
         )
         self._last: ContactState | None = None
+
+    def __repr__(self) -> str:
+        ny, nx = self.surface.shape
+        return (
+            f"ContactProblem({ny}x{nx} surface, dx={self.surface.dx:.6g}, "
+            f"E*={self.e_star:.6g}, boundary={self.boundary!r}, "
+            f"h_s={self.h_range:.6g}, max_approach={self.max_approach:.6g})"
+        )
 
     @property
     def max_approach(self) -> float:

@@ -34,6 +34,17 @@ class PercolationThreshold:
     def found(self) -> bool:
         return self.above is not None
 
+    def __repr__(self) -> str:
+        # The two bracketing states are grids: name their approaches only.
+        above = "None" if self.above is None else f"{self.above.approach:.6g}"
+        return (
+            f"PercolationThreshold(approach={self.approach:.6g}, "
+            f"contact_fraction={self.contact_fraction:.4g}, "
+            f"approach/h_s={self.approach_dimensionless:.4g}, axis={self.axis!r}, "
+            f"found={self.found}, solves={self.solves}, "
+            f"bracket=[{self.below.approach:.6g}, {above}])"
+        )
+
 
 def percolation_threshold(
     surface: Surface,

@@ -108,10 +108,13 @@ def _run_sweep(
     if keep_fields:
         files["fields"] = result.save_fields(out / FIELDS_NAME)
         record.add([files["fields"]])
-    figures = result.plot(out / FIGURES_DIR)
-    record.add(figures)
-    from ..plotting.flow import save_flow_figures  # leak-rate figures (fig4, flux maps)
+    # The files of result.plot(directory), in two steps so that each is recorded as written:
+    # the paper's figures, then the leak-rate ones (fig4, flux maps) when there is flow.
+    from ..plotting.flow import save_flow_figures
+    from ..plotting.paper import save_paper_figures
 
+    figures = save_paper_figures(result, out / FIGURES_DIR)
+    record.add(figures)
     figures += save_flow_figures(result, out / FIGURES_DIR, flux_levels=args.flux_maps)
     record.add(figures)
     extra = {

@@ -108,6 +108,11 @@ def threshold_from_rows(rows: Sequence[Mapping[str, Any]], axis: Any = 0) -> dic
 # ============================================================================ tasks
 
 
+#: Parameter-set keys and directory characters an :class:`EnsembleResult` repr shows.
+_REPR_KEYS = 4
+_REPR_PATH = 120
+
+
 @dataclass(frozen=True, eq=False)
 class EnsembleResult:
     """Aggregated ensemble (see the module docstring for the files and definitions).
@@ -145,10 +150,18 @@ class EnsembleResult:
 
     def __repr__(self) -> str:
         # The aggregate and threshold tables have hundreds of rows: summarise them.
+        # A long parameter grid or directory is cut short as well.
         surfaces = sum(len(ps.seeds) for ps in self.param_sets)
+        keys = self.keys
+        shown = ", ".join(keys[:_REPR_KEYS])
+        if len(keys) > _REPR_KEYS:
+            shown += f", … {len(keys) - _REPR_KEYS} more"
+        directory = str(self.directory)
+        if len(directory) > _REPR_PATH:
+            directory = "…" + directory[-(_REPR_PATH - 1):]
         return (
-            f"EnsembleResult(directory={str(self.directory)!r}, "
-            f"param_sets=[{', '.join(self.keys)}], surfaces={surfaces}, "
+            f"EnsembleResult(directory={directory!r}, "
+            f"param_sets=[{shown}], surfaces={surfaces}, "
             f"levels={self.identity.get('levels')}, aggregate_rows={len(self.aggregate)}, "
             f"figures={len(self.figures)})"
         )

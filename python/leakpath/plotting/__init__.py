@@ -5,7 +5,7 @@ Each module draws from results (a sweep table, an ensemble directory) and writes
 atomically; none of them computes physics.
 """
 
-from .flow import flux_magnitude, level_flow, save_flow_figures
+from .flow import flow_figures, flux_magnitude, level_flow, save_flow_figures
 from .paper import (
     CLASS_COLOURS,
     CLASS_NAMES,
@@ -14,6 +14,7 @@ from .paper import (
     figure_topography_moments,
     figure_vpg_moments,
     figure_vpg_volume_gap,
+    paper_figures,
     plot_class_map,
     plot_moments,
     plot_topography,
@@ -34,8 +35,10 @@ __all__ = [
     "figure_topography_moments",
     "figure_vpg_moments",
     "figure_vpg_volume_gap",
+    "flow_figures",
     "flux_magnitude",
     "level_flow",
+    "paper_figures",
     "plot_class_map",
     "plot_moments",
     "plot_topography",

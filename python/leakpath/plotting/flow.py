@@ -42,6 +42,7 @@ __all__ = [
     "figure_leak_rate",
     "figure_flux_map",
     "level_flow",
+    "flow_figures",
     "save_flow_figures",
 ]
 
@@ -175,6 +176,47 @@ def figure_flux_map(result: SweepResult, k: int) -> Figure:
     return fig
 
 
+def _flux_levels(result: SweepResult, flux_levels: Iterable[int] | None) -> list[int] | None:
+    """The rows to draw flux maps of (default: the last leaking row), checked; ``None`` when
+    the sweep has no leak-rate columns (refused if ``flux_levels`` asks for maps)."""
+    if not _has_flow(result):
+        if flux_levels:
+            raise InvalidArgumentError(
+                "flux_levels: the sweep has no leak-rate columns (flow=False); run it with "
+                "flow=True (--flow)",
+                argument="flux_levels",
+            )
+        return None
+    n = len(result.rows)
+    if flux_levels is None:
+        leaking = [i for i, r in enumerate(result.rows) if r["Q"] > 0]
+        levels = leaking[-1:]
+    else:
+        levels = list(flux_levels)
+    for k in levels:
+        if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or not 0 <= k < n:
+            raise InvalidArgumentError(
+                f"flux_levels: row indices must lie in 0…{n - 1}, got {k!r}",
+                argument="flux_levels",
+            )
+    return [int(k) for k in levels]
+
+
+def flow_figures(
+    result: SweepResult, *, flux_levels: Iterable[int] | None = None
+) -> dict[str, Figure]:
+    """``fig4_leak_rate`` and one flux map per row in ``flux_levels`` (default: the last
+    leaking row), drawn but not written: file stem → Figure, in the order
+    :func:`save_flow_figures` writes them; empty when the sweep has no leak-rate columns."""
+    levels = _flux_levels(result, flux_levels)
+    if levels is None:
+        return {}
+    figures = {"fig4_leak_rate": figure_leak_rate(result)}
+    for k in levels:
+        figures[f"flux_k{k:02d}"] = figure_flux_map(result, k)
+    return figures
+
+
 def save_flow_figures(
     result: SweepResult,
     outdir: str | os.PathLike[str],
@@ -189,26 +231,9 @@ def save_flow_figures(
 
     if isinstance(formats, str):
         formats = (formats,)
-    if not _has_flow(result):
-        if flux_levels:
-            raise InvalidArgumentError(
-                "flux_levels: the sweep has no leak-rate columns (flow=False); run it with "
-                "flow=True (--flow)",
-                argument="flux_levels",
-            )
+    levels = _flux_levels(result, flux_levels)
+    if levels is None:
         return []
-    n = len(result.rows)
-    if flux_levels is None:
-        leaking = [i for i, r in enumerate(result.rows) if r["Q"] > 0]
-        levels = leaking[-1:]
-    else:
-        levels = list(flux_levels)
-    for k in levels:
-        if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or not 0 <= k < n:
-            raise InvalidArgumentError(
-                f"flux_levels: row indices must lie in 0…{n - 1}, got {k!r}",
-                argument="flux_levels",
-            )
     out = _validate.path("outdir", outdir)
     _validate.make_directory("outdir", out)
     paths = save_figure(figure_leak_rate(result), out / "fig4_leak_rate", formats, dpi)

@@ -55,6 +55,7 @@ __all__ = [
     "figure_vpg_moments",
     "figure_class_map",
     "default_map_levels",
+    "paper_figures",
     "save_figure",
     "save_paper_figures",
 ]
@@ -281,6 +282,32 @@ def default_map_levels(result: SweepResult) -> list[int]:
     return picks
 
 
+def _map_levels(result: SweepResult, levels_to_map: Iterable[int] | None) -> list[int]:
+    """``levels_to_map`` checked against the rows (default :func:`default_map_levels`)."""
+    levels = default_map_levels(result) if levels_to_map is None else list(levels_to_map)
+    n = len(result.rows)
+    for k in levels:
+        if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or not 0 <= k < n:
+            raise ValueError(f"levels_to_map: row indices must lie in 0…{n - 1}, got {k!r}")
+    return [int(k) for k in levels]
+
+
+def paper_figures(
+    result: SweepResult, *, levels_to_map: Iterable[int] | None = None
+) -> dict[str, Figure]:
+    """Figs. 1–3 and one class map per level in ``levels_to_map`` (default
+    :func:`default_map_levels`), drawn but not written: file stem → Figure, in the order
+    :func:`save_paper_figures` writes them."""
+    figures = {
+        "fig1_topography_moments": figure_topography_moments(result),
+        "fig2_vpg_volume_gap": figure_vpg_volume_gap(result),
+        "fig3_vpg_moments": figure_vpg_moments(result),
+    }
+    for k in _map_levels(result, levels_to_map):
+        figures[f"map_k{k:02d}"] = figure_class_map(result, k)
+    return figures
+
+
 def save_figure(
     fig: Figure, stem: Path, formats: Sequence[str], dpi: int = 150, *, tight: bool = False
 ) -> list[Path]:
@@ -346,11 +373,7 @@ def save_paper_figures(
     bad = [f for f in formats if f not in _FORMATS]
     if bad or not formats:
         raise ValueError(f"formats: choose from {', '.join(_FORMATS)}; got {list(formats)!r}")
-    levels = default_map_levels(result) if levels_to_map is None else list(levels_to_map)
-    n = len(result.rows)
-    for k in levels:
-        if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or not 0 <= k < n:
-            raise ValueError(f"levels_to_map: row indices must lie in 0…{n - 1}, got {k!r}")
+    levels = _map_levels(result, levels_to_map)
     out = _validate.path("outdir", outdir)
     _validate.make_directory("outdir", out)
     remove_stale_temporaries(out)
