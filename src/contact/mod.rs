@@ -3,10 +3,11 @@
 //! [`ContactProblem`] owns the operator (and the dense factor of the exact solvers) and is the
 //! one entry point: [`ContactProblem::solve`]`(control, solver, start, options)`. The solvers
 //! themselves: [`polonsky_keer`] (constrained conjugate gradients on the FFT operator) and
-//! [`lawson_hanson`] (Lawson–Hanson NNLS and its block active-set variant on the dense
-//! Cholesky factor of the contact block); both report the [`kkt`] certificate. A cold
+//! [`lawson_hanson`] (Lawson–Hanson NNLS and its block active-set variant on the updatable
+//! Cholesky [`factor`] of the contact block); both report the [`kkt`] certificate. A cold
 //! Polonsky–Keer solve starts from the [`multilevel`] coarse-to-fine pressure.
 
+pub mod factor;
 pub mod kkt;
 pub mod lawson_hanson;
 pub mod multilevel;

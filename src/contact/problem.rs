@@ -9,7 +9,8 @@
 use std::sync::Arc;
 
 use crate::alloc;
-use crate::contact::lawson_hanson::{self as lh, Factor, LawsonHanson, Pivoting};
+use crate::contact::factor::Factor;
+use crate::contact::lawson_hanson::{self as lh, LawsonHanson, Pivoting};
 use crate::contact::multilevel::CoarseCost;
 use crate::contact::polonsky_keer as pk;
 use crate::elastic::kernel::Kernel;
