@@ -5,12 +5,12 @@
 //! themselves: [`polonsky_keer`] (constrained conjugate gradients on the FFT operator) and
 //! [`lawson_hanson`] (Lawson–Hanson NNLS and its block active-set variant on the updatable
 //! Cholesky [`factor`] of the contact block); both report the [`kkt`] certificate. A cold
-//! Polonsky–Keer solve starts from the [`multilevel`] coarse-to-fine pressure.
+//! Polonsky–Keer solve starts from the coarse-to-fine pressure of
+//! [`polonsky_keer`]'s coarse levels.
 
 pub mod factor;
 pub mod kkt;
 pub mod lawson_hanson;
-pub mod multilevel;
 pub mod polonsky_keer;
 pub mod problem;
 

@@ -11,7 +11,7 @@ use pyo3::types::PyDict;
 use super::pools::{check_threads, pool_for, run_solve};
 use super::{check_positive, to_py};
 use crate::alloc;
-use crate::contact::multilevel::CoarseCost;
+use crate::contact::polonsky_keer::CoarseCost;
 use crate::contact::{ContactProblem as Problem, Control, SolveOptions, Solver, Start};
 use crate::error::Error;
 use crate::grid::Boundary;

@@ -34,7 +34,7 @@
 
 use rayon::prelude::*;
 
-use super::polonsky_keer::{self as pk, Control, Options, Problem};
+use super::{Control, Options, Problem, Solution};
 use crate::error::Result;
 use crate::grid::Boundary;
 
@@ -94,12 +94,15 @@ pub fn coarse_side(n: usize) -> usize {
 }
 
 /// The coarse-level start pressure for `problem` (fine grid), with the cost of all coarser
-/// levels, or `None` when the coarse solve has nothing in contact.
+/// levels, or `None` when the coarse solve has nothing in contact. `solve_coarse(problem,
+/// control, options, levels)` solves a coarse level (with at most `levels` below it) and may
+/// stop on its incrementally updated state: only its pressure is used.
 pub fn start(
     problem: &Problem,
     control: Control,
     opts: &Options,
     levels: usize,
+    solve_coarse: impl Fn(&Problem, Control, &Options, usize) -> Result<Solution>,
 ) -> Result<Option<(Vec<f64>, CoarseCost)>> {
     let (ny, nx) = (problem.ny, problem.nx);
     let (cy, cx) = (coarse_side(ny), coarse_side(nx));
@@ -146,13 +149,7 @@ pub fn start(
         chord_steps: opts.chord_steps,
     };
     // Only the coarse pressure is used: no confirming product at the end of a coarse level.
-    let sol = pk::solve_level(
-        &coarse,
-        coarse_control,
-        &copts,
-        pk::Finish::Incremental,
-        levels - 1,
-    )?;
+    let sol = solve_coarse(&coarse, coarse_control, &copts, levels - 1)?;
     drop(hc);
     if sol.contact_points == 0 {
         return Ok(None);

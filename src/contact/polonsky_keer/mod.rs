@@ -1,0 +1,519 @@
+//! Polonsky–Keer constrained conjugate gradients (Polonsky & Keer, *Wear* 231 (1999) 206–219),
+//! matrix-free with the FFT influence operator.
+//!
+//! # Problem
+//!
+//! With heights `h` (row-major `ny × nx`), `u = C p` and the conventions of `docs/conventions.md`, find
+//!
+//! ```text
+//! p ≥ 0,   g = max h − Δ − h + C p ≥ 0,   p·g = 0,
+//! ```
+//!
+//! i.e. minimise `f(p) = ½ pᵀCp − bᵀp` over `p ≥ 0` with `b_i = Δ − (max h − h_i)`; the
+//! gradient of `f` is `∇f = Cp − b = g`. Two controls:
+//!
+//! * **displacement** ([`Control::Approach`]): `Δ ≥ 0` is given and fixed. There is no
+//!   mean-gap adjustment: the rigid-body term `max h − Δ` is part of the data.
+//! * **load** ([`Control::MeanPressure`]): `p̄ > 0` is given; every iterate keeps
+//!   `Σ p = p̄·N` (total force `F = p̄·A0 = dx² Σ p`). `Δ` is an unknown: each evaluation of
+//!   the gap takes it from the mean over the contact set `I_c = {p > 0}`,
+//!
+//!   ```text
+//!   Δ = mean_{i ∈ I_c} (max h − h_i + u_i),
+//!   ```
+//!
+//!   so that `g = max h − Δ − h + u` has zero mean on `I_c` (the paper's `g ← g − ḡ`).
+//!   Positive `Δ` means the flat has moved down into the surface from first touch. With
+//!   `boundary = "periodic"` it is measured in that convention (u has zero mean, `docs/conventions.md`),
+//!   and it is reported as computed, not clamped.
+//!
+//! # Iteration (the paper's steps, in this sign convention)
+//!
+//! ```text
+//! 1. g = max h − Δ − h + u                          (load: Δ from the mean over I_c)
+//!    G = Σ_{I_c} g²
+//! 2. t_i = g_i + δ (G / G_old) t_i on I_c, 0 elsewhere;  G_old = G
+//! 3. r = C t;  (load: r ← r − mean_{I_c} r)
+//! 4. τ = Σ_{I_c} g t / Σ_{I_c} r t
+//! 5. p_i ← p_i − τ t_i on I_c;  p_i < 0 → p_i = 0
+//! 6. I_ol = {p_i = 0, g_i < 0}:  empty → δ = 1;  else δ = 0 and p_i ← −τ g_i on I_ol
+//! 7. load: p ← p · (p̄N / Σ p)
+//! ```
+//!
+//! `I_ol` is taken after the truncation of step 5, with the gap of step 1, exactly as in the
+//! paper (a point truncated in this step that still overlaps re-enters at once); truncation
+//! alone does not reset `δ`, only a non-empty `I_ol` does.
+//!
+//! Two additions, both outside the paper's normal path:
+//!
+//! * **Empty or stalled contact set.** When `I_c` is empty (a displacement-controlled cold
+//!   start from `p = 0`) or the conjugate direction carries no descent (`Σ g t ≤ 0`, possible
+//!   only after truncation without reset), the step is a projected steepest-descent step on
+//!   `W = I_c ∪ {p = 0, g < 0}`: `t = g` on `W`, `δ = 0`, same exact line search. From `p = 0`
+//!   this is the exact line search along the penetration, `p = τ·max(−g, 0)`, which then
+//!   builds up the contact set. (Measured on self-affine surfaces, 257²–1025², Δ = 0.1–0.6 h_s:
+//!   starting instead from the Winkler guess `max(−g, 0)/C_00`, or a quarter of it, changes
+//!   the iteration count by less than ±10 %, either way; so the cold start stays `p = 0`.)
+//! * **Flat direction.** With the periodic operator a constant field has zero stiffness; if
+//!   `tᵀCt ≤ 0` the step is the largest one keeping `p ≥ 0` (ratio test).
+//!
+//! # One operator application per iteration
+//!
+//! The paper needs `C p` (step 1) and `C t` (step 3) each iteration. Here step 1 is
+//! incremental. Write the new pressure as the linear step plus a correction,
+//! `p' = p − τ t + d`, where `d` is non-zero only at the points truncated in step 5 or entering
+//! through `I_ol` in step 6. Then
+//!
+//! ```text
+//! displacement control:  g' = g − τ r + C d          (u is not needed while iterating)
+//! load control:          u' = s (u − τ r + C d),  p' ← s p',  s = p̄N / Σ p'
+//! ```
+//!
+//! * `d = 0` (the set did not change): nothing more; the iteration costs one FFT product.
+//! * `1 ≤ |supp d| ≤` [`sparse_limit`]: `C d` by direct summation with the influence table
+//!   `C e_0`, `N` multiply-adds per point. The table is the kernel table when one is at hand
+//!   (free solves built here: the Love table the operator is made from; a caller's
+//!   [`solve_with_kernel`]), otherwise it is built once by one product.
+//! * more changes: a fresh product `u = C p`, a second product in that iteration — unless the
+//!   changes are wholesale, see below.
+//!
+//! # Chord steps (displacement control)
+//!
+//! After a coarse start, or from `p = 0`, the first tens of iterations truncate or add
+//! thousands of points each (at 2049², Δ = 0.3 h_s, 15–45 % of the contact set in each of the
+//! first 20 iterations), so each would cost two products. When the last iteration changed
+//! more than [`CHORD_FRACTION`] of the contact set (and more than [`sparse_limit`] points),
+//! the next one is a chord step instead, with `β = 0`:
+//!
+//! ```text
+//! d = P(p − τ₀ t) − p        P = steps 5–6 (truncation, I_ol entry), τ₀ = last step length
+//! r = C d                    the one product of the iteration
+//! s = min(1, −Σ g d / Σ d r) exact minimiser of f on the chord p + s d, 0 < s ≤ 1
+//! p ← p + s d,  g ← g + s r
+//! ```
+//!
+//! The new `p` lies on the segment between `p ≥ 0` and `P(p − τ₀ t) ≥ 0`, so it is feasible,
+//! and the gap is updated exactly by the product of the whole change. `Σ g d < 0` (a descent
+//! chord) is required, otherwise the iteration takes the regular step. `τ₀` starts from the
+//! last line-search length and is scaled by `s` (or by 1.5 when `s = 1`) after each chord
+//! step. Once the changes fall below the threshold the regular conjugate iteration resumes.
+//! A chord step is a projected steepest-descent step, so it converges more slowly than the
+//! conjugate iteration; it pays only while the contact set changes wholesale, where the
+//! regular iteration restarts (`δ = 0`) anyway. Load control keeps the regular steps (its
+//! step 7 rescales `p`, which the chord does not model).
+//!
+//! Measured at 4097² (RMD D = 2.1, free, Δ = 0.1/0.3/0.6 h_s, tol 1e-8, coarse start, 2
+//! cores): 56/132/202 fine iterations of which 34/69/117 chord steps, 64/167/260 fine
+//! products (without chord steps 43/118/177 iterations, 72/202/321 products); the whole
+//! solve 31.0/85.7/138.3 s (32.6/93.4/158.2 s), 1.28/1.33/1.45 (1.69/1.73/1.89) times one
+//! operator application per fine iteration. With the FFT grid padded to 8192 instead of
+//! 8640 (`crate::grid::padded`): 56/133/197 iterations, 64/169/249 fine products,
+//! 28.4/76.1/117.2 s, 1.22/1.34/1.45 times one application.
+//!
+//! The iterates `t`, `z` and `p` vanish off the contact set, often on whole rows of the grid;
+//! the operator skips the forward row FFTs of zero rows (their transform is zero), so a
+//! product of such a field costs less than one of a dense field.
+//!
+//! Before the solver declares convergence on an incrementally updated state it recomputes
+//! `u = C p` and the gap and tests again, so the returned fields and certificate always come
+//! from a fresh product (round-off drift of the increments cannot fake convergence).
+//!
+//! # Preconditioning
+//!
+//! With [`Options::precondition`] (the default) a conjugate step on a stable contact set uses
+//! the preconditioned residual `z = M g` on `I_c`, `M` the inverse half-space compliance
+//! `E*|q|/2` applied by FFT on the `ny × nx` grid zero-padded to a 2,3,5-smooth size
+//! ([`Operator::inverse_compliance`]; `q = 0` gets the stiffness of the longest wavelength):
+//!
+//! ```text
+//! z = M (g on I_c) on I_c,   G = Σ_{I_c} g z,   t = z + δ (G / G_old) t
+//! ```
+//!
+//! (preconditioned CG on `C_PP`, in the spirit of Vollebregt's FFT-preconditioned BCCG). `M`
+//! is SPD on the padded grid, so its restriction to `I_c` is SPD and the step is a descent
+//! step; the exact line search is unchanged. A preconditioned `τ` is dimensionless, so points
+//! entering through `I_ol` in such a step get `p = −τ g / C_00` (the pressure that closes the
+//! gap of that point alone) instead of `−τ g`. A steepest-descent step, or a conjugate step
+//! after one, stays plain, and so does every step while more than half the points are in
+//! contact (where preconditioning stops paying); it is switched off for the rest of a solve
+//! when the certificate grows past `10³×` its best value. Each preconditioned iteration costs one more FFT pair on the
+//! unpadded grid (about a quarter of a free-boundary product; rows without a contact point
+//! skip both their forward and their inverse row FFT, as `z` is only used on `I_c`); measured at 257², tol 1e-12,
+//! it takes 1.2–2.8× fewer iterations (see [`PRECONDITION_MAX_FRACTION`]); the answer is
+//! the same minimiser (identical contact sets in every test).
+//!
+//! # Convergence
+//!
+//! The KKT certificate, relative to the height range `h_s = max h − min h`:
+//!
+//! ```text
+//! kkt = max( −min_i g_i,  max_{i ∈ I_c} |g_i|,  Σ p_i |g_i| / Σ p_i ) / h_s
+//! ```
+//!
+//! (the last term is dropped when `Σ p = 0`; the scale is `max(h_s, Δ)` in displacement
+//! control and `max(h_s, |Δ|, p̄ · C_00)` in load control, with the current `Δ`,
+//! `C_00 = 4 dx ln(1+√2)/(π E*)`; they differ from `h_s` only past the height range, where
+//! `u` and `Δ` are many `h_s` and round-off is relative to them). The solver stops when
+//! `kkt ≤ tol`, default [`DEFAULT_TOL`] `= 1e-12`: reachable in double precision (round-off
+//! of `u` is `~1e-15 · max |u|`) at a few CG iterations per decade. For a flat surface
+//! (`h_s = 0`) the scale is `Δ` (displacement control) or `p̄ · C_00` (load control).
+//!
+//! # Determinism
+//!
+//! Every reduction sums fixed chunks of [`CHUNK`] points in index order and combines the
+//! partial results sequentially in chunk order, and the operator is deterministic, so results
+//! do not depend on the number of rayon threads.
+
+mod coarse;
+mod driver;
+mod passes;
+mod sparse;
+#[cfg(test)]
+mod tests;
+mod validate;
+
+use std::time::Duration;
+
+pub use coarse::{CoarseCost, COARSE_START_MIN_SIDE, COARSE_TOL, MAX_COARSE_LEVELS};
+use driver::run;
+use validate::validate;
+
+use crate::elastic::kernel::Kernel;
+use crate::elastic::memory;
+use crate::elastic::operator::Operator;
+use crate::error::{Error, Result};
+use crate::grid::Boundary;
+
+/// Default KKT tolerance, relative to the height range.
+pub const DEFAULT_TOL: f64 = 1e-12;
+
+/// Points per reduction chunk: fixed, so the summation order is independent of the thread count.
+pub const CHUNK: usize = 4096;
+
+/// Non-linear pressure changes of one iteration (truncations, `I_ol`) up to this many are
+/// applied to the gap by direct summation with the influence table, `N` multiply-adds each,
+/// instead of a fresh FFT product `C p`. Measured at 1025² and 2049² (2 cores): one point
+/// costs about 1/50 of a free-boundary product; the periodic product is about 4× cheaper (no
+/// padding). See [`sparse_limit`].
+pub const SPARSE_MAX: usize = 40;
+
+/// The direct-summation limit for a boundary: [`SPARSE_MAX`] (free) or a quarter of it
+/// (periodic).
+pub fn sparse_limit(boundary: Boundary) -> usize {
+    match boundary {
+        Boundary::Free => SPARSE_MAX,
+        Boundary::Periodic => SPARSE_MAX / 4,
+    }
+}
+
+/// Preconditioned steps are taken while at most this fraction of the points is in contact.
+/// Measured on RMD (D = 2.1, 2.5) and spectral (H = 0.5, 0.9) surfaces at 257², tol 1e-12,
+/// iterations summed over 8 surfaces, plain → preconditioned: free Δ = 0.3/0.7/1.0/1.5/2.0 h_s
+/// 573 → 333, 884 → 478, 1090 → 670, 1268 → 797, 1382 → 1131; periodic at 0.5/0.8/0.9/0.95
+/// of full contact 611 → 306, 1470 → 525, 1999 → 952, 2213 → 1250, and unchanged near full
+/// contact (0.999), where more than half of the points are in contact for most of the solve.
+pub const PRECONDITION_MAX_FRACTION: f64 = 0.5;
+
+/// A preconditioned solve whose certificate grows past this multiple of its best value so
+/// far continues with plain Polonsky–Keer steps.
+const SAFEGUARD: f64 = 1e3;
+
+/// Chord steps replace the regular step while an iteration changes more than this fraction
+/// of the contact set (and more than the direct-summation limit) by truncation or `I_ol`
+/// entry. Measured at 2049² (RMD D = 2.1, free, Δ = 0.1/0.3/0.6 h_s, coarse start, tol
+/// 1e-8): without chord steps 52/130/212 fine products in 34/78/122 iterations; with
+/// 0.3 % 47/113/177 in 42/99/156; 0.5 % 47/122/156 in 42/102/124; 1 % 45/106/154 in
+/// 39/83/112; 3 % 41/118/161 in 36/88/109. A lower fraction means fewer products per
+/// iteration but more (steepest-descent) iterations; 0.5 % keeps the whole solve time within
+/// a few per cent of the best of these.
+pub const CHORD_FRACTION: f64 = 0.005;
+
+/// The chord's trial length `τ₀` grows by this factor after a step that used the whole chord
+/// (`s = 1`) and shrinks to `max(s, CHORD_SHRINK_MIN) τ₀` otherwise.
+const CHORD_GROW: f64 = 1.5;
+const CHORD_SHRINK_MIN: f64 = 0.1;
+
+/// Whether `changed` truncations and `I_ol` entries out of `n_c` contact points make the
+/// next step a chord step.
+fn wholesale(changed: usize, n_c: usize, sparse_max: usize) -> bool {
+    changed > sparse_max && changed as f64 > CHORD_FRACTION * n_c as f64
+}
+
+/// `should_stop` is polled at least every this many iterations…
+const STOP_EVERY: usize = 10;
+/// …and at least this often on grids where ten iterations take long.
+const STOP_INTERVAL: Duration = Duration::from_millis(250);
+
+/// What is imposed.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Control {
+    /// The approach `Δ ≥ 0` of the flat below the highest point.
+    Approach(f64),
+    /// The mean pressure `p̄ > 0` (`F = p̄·A0`); the approach is an output.
+    MeanPressure(f64),
+}
+
+/// The surface and the elastic model.
+#[derive(Clone, Copy, Debug)]
+pub struct Problem<'a> {
+    /// Row-major `ny × nx` heights.
+    pub heights: &'a [f64],
+    pub ny: usize,
+    pub nx: usize,
+    /// Grid spacing (both axes).
+    pub dx: f64,
+    /// Contact modulus `E* = E/(1 − ν²)`.
+    pub e_star: f64,
+    pub boundary: Boundary,
+}
+
+/// Solver settings.
+#[derive(Clone, Copy)]
+pub struct Options<'a> {
+    /// Stop when the KKT certificate (relative to `h_s`) is `≤ tol`.
+    pub tol: f64,
+    /// Iteration cap; `None` → [`default_max_iter`].
+    pub max_iter: Option<usize>,
+    /// Warm start: a pressure field (`ny × nx`, finite; negative values are clipped to 0).
+    /// In load control it is rescaled to the imposed load.
+    pub initial_pressure: Option<&'a [f64]>,
+    /// Refuse up front with [`Error::TooLarge`] when [`memory::polonsky_keer`] exceeds this (bytes).
+    pub memory_limit: Option<u64>,
+    /// Polled every ~10 iterations (and at least every 0.25 s); `true` → [`Error::Interrupted`].
+    pub should_stop: Option<&'a (dyn Fn() -> bool + Sync)>,
+    /// Precondition the conjugate directions with the periodic inverse compliance
+    /// `E*|q|/2` restricted to the contact set (see the module documentation).
+    pub precondition: bool,
+    /// Start a cold solve from the solution on the grid coarsened by two, recursively
+    /// ([`crate::multilevel`]); ignored with a warm start and on grids smaller than
+    /// [`crate::multilevel::COARSE_START_MIN_SIDE`] per side.
+    pub coarse_start: bool,
+    /// Take chord steps while the contact set changes wholesale (displacement control, see
+    /// the module documentation); `false` keeps every iteration a regular Polonsky–Keer step.
+    pub chord_steps: bool,
+}
+
+impl Default for Options<'_> {
+    fn default() -> Self {
+        Options {
+            tol: DEFAULT_TOL,
+            max_iter: None,
+            initial_pressure: None,
+            memory_limit: None,
+            should_stop: None,
+            precondition: true,
+            coarse_start: true,
+            chord_steps: true,
+        }
+    }
+}
+
+/// A converged contact state.
+#[derive(Clone, Debug)]
+pub struct Solution {
+    pub ny: usize,
+    pub nx: usize,
+    /// Pressure `p ≥ 0`, row-major.
+    pub pressure: Vec<f64>,
+    /// Displacement `u = C p` (fresh product of the returned `p`).
+    pub displacement: Vec<f64>,
+    /// Gap `g = max h − Δ − h + u`, not clamped: contact points carry the residual `|g| ≤ kkt·h_s`.
+    pub gap: Vec<f64>,
+    /// Approach `Δ` (the imposed one, or the computed one in load control).
+    pub approach: f64,
+    /// Conjugate-gradient iterations (each one product `C t`).
+    pub iterations: usize,
+    /// FFT operator applications in total: one per iteration, plus fresh products `C p` (start,
+    /// large set changes, convergence checks) and one for the influence table when no kernel
+    /// table was at hand (periodic [`solve`], [`solve_with_operator`]).
+    pub applies: usize,
+    /// Preconditioner applications (FFT pairs on the unpadded `ny × nx` grid), one per
+    /// preconditioned iteration.
+    pub preconditioner_applies: usize,
+    /// Iterations that were chord steps (included in `iterations`; each one product `C d`).
+    pub chord_steps: usize,
+    /// KKT certificate relative to `h_s` (see the module documentation).
+    pub kkt: f64,
+    /// Number of points with `p > 0`.
+    pub contact_points: usize,
+    /// Total force `F = dx² Σ p`.
+    pub load: f64,
+    /// Mean pressure `p̄ = Σ p / N`.
+    pub mean_pressure: f64,
+    /// What the coarse levels of a coarse start cost (zero without one); not included in
+    /// `iterations`, `applies`, `preconditioner_applies`.
+    pub coarse: CoarseCost,
+}
+
+/// Default iteration cap, `max(5000, ⌈100·N^¼⌉)`. CG iterations grow like `√cond(C)`, and
+/// `cond(C) = O(√N)`: measured on self-affine surfaces (H = 0.9, free, Δ = 0.3 h_s, tol 1e-10)
+/// 52, 89, 112 and 152 iterations at 129², 513², 1025² and 2049², so the cap leaves a margin
+/// of about 30× for harder cases (large contact fractions, periodic near full contact).
+pub fn default_max_iter(n: usize) -> usize {
+    let q = (100.0 * (n as f64).sqrt().sqrt()).ceil() as usize;
+    q.max(5000)
+}
+
+/// Solve on a new operator built for `problem` (free: Love kernel, zero-padded FFT; periodic:
+/// spectral stiffness).
+pub fn solve(problem: &Problem, control: Control, opts: &Options) -> Result<Solution> {
+    solve_level(problem, control, opts, Finish::Confirmed, MAX_COARSE_LEVELS)
+}
+
+/// How a solve ends once the certificate on the incrementally updated state meets `tol`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) enum Finish {
+    /// Recompute `u = C p` and test again: the returned fields and certificate come from a
+    /// fresh product (every solve a caller sees).
+    Confirmed,
+    /// Stop there (a coarse level of a coarse start, whose pressure is only a starting point).
+    /// The returned displacement is empty unless the last state came from a fresh product.
+    Incremental,
+}
+
+/// [`solve`] ending as `finish` says, with at most `levels` coarse levels below it.
+pub(crate) fn solve_level(
+    problem: &Problem,
+    control: Control,
+    opts: &Options,
+    finish: Finish,
+    levels: usize,
+) -> Result<Solution> {
+    validate(problem, control, opts)?;
+    let (ny, nx) = (problem.ny, problem.nx);
+    if let Some(limit) = opts.memory_limit {
+        let bytes = memory::polonsky_keer(ny, nx, problem.boundary);
+        if bytes > limit {
+            return Err(Error::TooLarge {
+                bytes,
+                limit,
+                what: format!(
+                    "Polonsky–Keer on a {ny} × {nx} {} grid",
+                    boundary_name(problem.boundary)
+                ),
+            });
+        }
+    }
+    // The coarse levels run before the fine operator exists, so their memory is not added
+    // to its.
+    let start = coarse_start(problem, control, opts, levels)?;
+    match problem.boundary {
+        Boundary::Free => {
+            // The Love kernel table is the influence table `C e_0` of the sparse corrections:
+            // kept instead of being rebuilt by a product.
+            let kernel = Kernel::try_new(ny, nx, problem.dx, problem.e_star)?;
+            let op = Operator::try_free(&kernel)?;
+            run_from(
+                &op,
+                Some(&kernel.table),
+                problem,
+                control,
+                opts,
+                start,
+                finish,
+            )
+        }
+        Boundary::Periodic => {
+            let op = Operator::try_periodic(ny, nx, problem.dx, problem.e_star)?;
+            run_from(&op, None, problem, control, opts, start, finish)
+        }
+    }
+}
+
+/// The coarse-level start of a cold solve, if [`Options::coarse_start`] asks for one.
+fn coarse_start(
+    problem: &Problem,
+    control: Control,
+    opts: &Options,
+    levels: usize,
+) -> Result<Option<(Vec<f64>, CoarseCost)>> {
+    if levels > 0 && coarse::applies_to(problem.ny, problem.nx, opts) {
+        coarse::start(problem, control, opts, levels, |p, c, o, below| {
+            solve_level(p, c, o, Finish::Incremental, below)
+        })
+    } else {
+        Ok(None)
+    }
+}
+
+/// [`run`] from a coarse start (if any), reporting its cost.
+fn run_from(
+    op: &Operator,
+    table: Option<&[f64]>,
+    problem: &Problem,
+    control: Control,
+    opts: &Options,
+    start: Option<(Vec<f64>, CoarseCost)>,
+    finish: Finish,
+) -> Result<Solution> {
+    match start {
+        Some((p0, cost)) => {
+            // The start pressure becomes the iterate (no second N-vector).
+            let mut sol = run(op, table, problem, control, opts, Some(p0), finish)?;
+            sol.coarse = cost;
+            Ok(sol)
+        }
+        None => run(op, table, problem, control, opts, None, finish),
+    }
+}
+
+/// Solve with an operator built by the caller (e.g. reused over a sweep of approaches). The
+/// operator must be the one of `problem` (shape and boundary are checked; `dx` and `E*` are
+/// trusted).
+pub fn solve_with_operator(
+    op: &Operator,
+    problem: &Problem,
+    control: Control,
+    opts: &Options,
+) -> Result<Solution> {
+    solve_with_kernel(op, None, problem, control, opts)
+}
+
+/// [`solve_with_operator`] with the caller's influence table `C e_0` (row-major `ny × nx`,
+/// the [`Kernel`] table of `op`: the Love table for the free boundary, the circulant's first
+/// column for the periodic one), which spares the product that would build it.
+pub fn solve_with_kernel(
+    op: &Operator,
+    table: Option<&[f64]>,
+    problem: &Problem,
+    control: Control,
+    opts: &Options,
+) -> Result<Solution> {
+    validate(problem, control, opts)?;
+    if let Some(t) = table {
+        if t.len() != problem.ny * problem.nx {
+            return Err(Error::invalid(
+                "kernel",
+                format!(
+                    "{} values for a {} × {} grid",
+                    t.len(),
+                    problem.ny,
+                    problem.nx
+                ),
+            ));
+        }
+    }
+    if op.ny != problem.ny || op.nx != problem.nx || op.boundary != problem.boundary {
+        return Err(Error::invalid(
+            "operator",
+            format!(
+                "built for a {} × {} {} grid, the heights are {} × {} {}",
+                op.ny,
+                op.nx,
+                boundary_name(op.boundary),
+                problem.ny,
+                problem.nx,
+                boundary_name(problem.boundary)
+            ),
+        ));
+    }
+    let start = coarse_start(problem, control, opts, MAX_COARSE_LEVELS)?;
+    run_from(op, table, problem, control, opts, start, Finish::Confirmed)
+}
+
+pub(super) fn boundary_name(b: Boundary) -> &'static str {
+    match b {
+        Boundary::Free => "free",
+        Boundary::Periodic => "periodic",
+    }
+}
