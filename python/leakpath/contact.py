@@ -43,7 +43,7 @@ DEFAULT_TOL = 1e-12
 
 #: ``solver="auto"`` uses the exact block active set on grids of at most this many points
 #: (displacement control) and Polonsky–Keer above. The policy and the measurements behind it
-#: live with the solvers in the Rust core (``src/contact/problem.rs``).
+#: live with the solvers in the Rust core (``src/contact/problem.rs``, ``Solver::resolve``).
 AUTO_ACTIVE_SET_MAX_POINTS: int = _core.AUTO_ACTIVE_SET_MAX_POINTS
 
 

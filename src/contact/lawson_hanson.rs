@@ -29,6 +29,7 @@ use rayon::prelude::*;
 use crate::alloc;
 use crate::contact::factor::Factor;
 use crate::contact::kkt::kkt_certificate;
+use crate::contact::problem::{CoarseCost, Solution, Solver};
 use crate::elastic::kernel::Kernel;
 use crate::elastic::operator::Operator;
 use crate::error::{Error, Result};
@@ -61,19 +62,6 @@ pub enum Start<'a> {
     Previous,
     /// A given contact set (flat indices), e.g. from another solver or another level.
     Set(&'a [usize]),
-}
-
-/// Result of one contact solve.
-#[derive(Clone, Debug)]
-pub struct Solution {
-    pub pressure: Vec<f64>,
-    pub displacement: Vec<f64>,
-    pub gap: Vec<f64>,
-    pub approach: f64,
-    pub iterations: usize,
-    pub kkt: f64,
-    /// Number of points with `p > 0`.
-    pub contact_points: usize,
 }
 
 /// `(max h, h_s)` of a height field.
@@ -307,14 +295,26 @@ impl<'a> LawsonHanson<'a> {
         gap.extend((0..n).map(|i| u[i] - b[i]));
         let kkt = kkt_certificate(&p, &gap, scale);
         let contact_points = p.iter().filter(|&&v| v > 0.0).count();
+        let sum_p: f64 = p.iter().sum();
+        let dx = self.kernel.dx;
         Ok(Solution {
+            solver: match opts.pivoting {
+                Pivoting::Single => Solver::LawsonHanson,
+                Pivoting::Block => Solver::ActiveSet,
+            },
             pressure: p,
             displacement: u,
             gap,
             approach,
             iterations,
+            applies: 0,
+            preconditioner_applies: 0,
+            chord_steps: 0,
             kkt,
             contact_points,
+            load: sum_p * dx * dx,
+            mean_pressure: sum_p / n as f64,
+            coarse: CoarseCost::default(),
         })
     }
 }

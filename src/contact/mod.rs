@@ -13,8 +13,10 @@ pub mod kkt;
 pub mod lawson_hanson;
 pub mod polonsky_keer;
 pub mod problem;
+pub mod solve;
 
 pub use problem::{
-    ContactProblem, ContactSolution, Control, SolveOptions, Solver, Start,
-    AUTO_ACTIVE_SET_MAX_POINTS,
+    CoarseCost, Control, Options, Problem, Solution, Solver, Start, AUTO_ACTIVE_SET_MAX_POINTS,
+    DEFAULT_TOL,
 };
+pub use solve::ContactProblem;

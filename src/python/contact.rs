@@ -11,8 +11,7 @@ use pyo3::types::PyDict;
 use super::pools::{check_threads, pool_for, run_solve};
 use super::{check_positive, to_py};
 use crate::alloc;
-use crate::contact::polonsky_keer::CoarseCost;
-use crate::contact::{ContactProblem as Problem, Control, SolveOptions, Solver, Start};
+use crate::contact::{CoarseCost, ContactProblem as Problem, Control, Options, Solver, Start};
 use crate::error::Error;
 use crate::grid::Boundary;
 
@@ -73,7 +72,7 @@ pub(super) fn heights_vec(h: &PyReadonlyArray2<'_, f64>) -> PyResult<(Vec<f64>, 
 /// An elastic rough surface against a rigid flat, ready to be solved at many approaches.
 #[pyclass(name = "ContactProblem", module = "leakpath._core")]
 pub(super) struct ContactProblem {
-    /// Kernel, operator, heights, factor and last pressure (core: contact/problem.rs).
+    /// Kernel, operator, heights, factor and last pressure (core: contact/solve.rs).
     pub(super) inner: Problem,
 }
 
@@ -284,10 +283,11 @@ impl ContactProblem {
                 Owned::Pressure(p) => Start::Pressure(p),
                 Owned::Set(s) => Start::ContactSet(s),
             };
-            let opts = SolveOptions {
+            let opts = Options {
                 tol,
                 max_iter,
                 should_stop: Some(&should_stop),
+                ..Options::default()
             };
             let result = run_solve(&pool, n, || work.solve(control, solver, start, &opts));
             (result, work)
@@ -312,7 +312,7 @@ impl ContactProblem {
     }
 }
 
-/// Polonsky–Keer constrained conjugate gradients on the FFT operator (core: contact/polonsky_keer.rs); a stand-alone call on heights.
+/// Polonsky–Keer constrained conjugate gradients on the FFT operator (core: contact/polonsky_keer/); a stand-alone call on heights.
 pub(crate) mod pk_py {
     use std::time::Instant;
 
@@ -321,7 +321,8 @@ pub(crate) mod pk_py {
     use pyo3::types::PyDict;
 
     use crate::alloc;
-    use crate::contact::polonsky_keer::{self as pk, Control, Options, Problem};
+    use crate::contact::polonsky_keer as pk;
+    use crate::contact::{Control, Options, Problem};
     use crate::elastic::memory;
     use crate::error::Error;
     use crate::grid::Boundary;
@@ -446,7 +447,6 @@ pub(crate) mod pk_py {
             let opts = Options {
                 tol,
                 max_iter,
-                initial_pressure: p0.as_deref(),
                 memory_limit: Some(memory_limit),
                 should_stop: Some(&should_stop),
                 precondition,
@@ -456,10 +456,15 @@ pub(crate) mod pk_py {
             crate::python::on_solver_pool(ny * nx, || match &op {
                 // The operator of a kept ContactProblem: no kernel or FFT set-up per solve.
                 // Its kernel table is the influence table of the sparse corrections.
-                Some((op, kernel)) => {
-                    pk::solve_with_kernel(op, Some(&kernel.table), &problem, control, &opts)
-                }
-                None => pk::solve(&problem, control, &opts),
+                Some((op, kernel)) => pk::solve_with_kernel(
+                    op,
+                    Some(&kernel.table),
+                    &problem,
+                    control,
+                    &opts,
+                    p0.as_deref(),
+                ),
+                None => pk::solve(&problem, control, &opts, p0.as_deref()),
             })
         })?;
         let seconds = start.elapsed().as_secs_f64();

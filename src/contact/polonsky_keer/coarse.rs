@@ -34,7 +34,7 @@
 
 use rayon::prelude::*;
 
-use super::{Control, Options, Problem, Solution};
+use crate::contact::problem::{CoarseCost, Control, Options, Problem, Solution};
 use crate::error::Result;
 use crate::grid::Boundary;
 
@@ -65,27 +65,10 @@ pub const COARSE_TOL: f64 = 1e-2;
 /// the influence-table product, 102/282/428.
 pub const MAX_COARSE_LEVELS: usize = 2;
 
-/// What the coarse levels cost, summed over all of them.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct CoarseCost {
-    /// Levels solved below the fine grid.
-    pub levels: usize,
-    /// Polonsky–Keer iterations on the coarse levels.
-    pub iterations: usize,
-    /// Operator applications on the coarse levels (raw count, each on its own grid).
-    pub applies: usize,
-    /// Preconditioner applications on the coarse levels (raw count).
-    pub preconditioner_applies: usize,
-    /// `Σ applies · N_level / N_fine`: the coarse products in units of one fine product.
-    pub applies_fine_equivalent: f64,
-    /// The same for the preconditioner applications.
-    pub preconditioner_fine_equivalent: f64,
-}
-
 /// Whether a coarse start is made for a grid (the option is on, there is no warm start, and
 /// the grid is large enough).
-pub fn applies_to(ny: usize, nx: usize, opts: &Options) -> bool {
-    opts.coarse_start && opts.initial_pressure.is_none() && ny.min(nx) >= COARSE_START_MIN_SIDE
+pub fn applies_to(ny: usize, nx: usize, opts: &Options, initial: Option<&[f64]>) -> bool {
+    opts.coarse_start && initial.is_none() && ny.min(nx) >= COARSE_START_MIN_SIDE
 }
 
 /// Coarse grid size along one axis.
@@ -141,7 +124,6 @@ pub fn start(
     let copts = Options {
         tol: COARSE_TOL.max(opts.tol),
         max_iter: None,
-        initial_pressure: None,
         memory_limit: None,
         should_stop: opts.should_stop,
         precondition: opts.precondition,

@@ -5,17 +5,11 @@ use std::time::Instant;
 
 use rayon::prelude::*;
 
-use super::passes::{Acc, Work};
+use super::passes::{Acc, Mode, Work};
 use super::*;
 use crate::alloc;
+use crate::contact::problem::Solver;
 use crate::elastic::kernel::love_displacement;
-
-#[derive(Clone, Copy, Debug)]
-pub(super) enum Mode {
-    Displacement(f64),
-    /// Target `Σ p = p̄ N`.
-    Load(f64),
-}
 
 /// `x > 0` and not NaN.
 #[inline]
@@ -40,17 +34,31 @@ pub(super) fn height_stats(h: &[f64]) -> (f64, f64, f64) {
     )
 }
 
-/// The iteration. `start`: an initial pressure (`≥ 0`, `N` values) taken over as the iterate,
-/// used instead of `opts.initial_pressure` (the coarse start; there is no warm start then).
+/// Where the iteration starts.
+pub(super) enum Begin<'a> {
+    /// `p = 0` (displacement control) or the uniform `p̄` (load control, the paper's).
+    Zero,
+    /// A caller's pressure field (`N` finite values; negative ones are clipped to 0).
+    Warm(&'a [f64]),
+    /// The coarse start's prolonged pressure (`≥ 0`, `N` values), taken over as the iterate.
+    Coarse(Vec<f64>),
+}
+
+/// The iteration from `begin`.
 pub(super) fn run(
     op: &Operator,
     table: Option<&[f64]>,
     problem: &Problem,
     control: Control,
     opts: &Options,
-    start: Option<Vec<f64>>,
+    begin: Begin<'_>,
     finish: Finish,
 ) -> Result<Solution> {
+    let (start, initial) = match begin {
+        Begin::Zero => (None, None),
+        Begin::Warm(p0) => (None, Some(p0)),
+        Begin::Coarse(p0) => (Some(p0), None),
+    };
     let (ny, nx) = (problem.ny, problem.nx);
     let n = ny * nx;
     let h = problem.heights;
@@ -153,7 +161,7 @@ pub(super) fn run(
     }
 
     // Initial pressure: the warm start, or p = 0 (displacement) / uniform p̄ (load, the paper's).
-    if let Some(p0) = opts.initial_pressure {
+    if let Some(p0) = initial {
         w.p.par_iter_mut()
             .zip(p0.par_iter())
             .for_each(|(p, &v)| *p = v.max(0.0));
@@ -420,8 +428,7 @@ pub(super) fn run(
         Vec::new()
     };
     Ok(Solution {
-        ny,
-        nx,
+        solver: Solver::PolonskyKeer,
         pressure,
         displacement,
         gap,

@@ -174,18 +174,16 @@ mod validate;
 
 use std::time::Duration;
 
-pub use coarse::{CoarseCost, COARSE_START_MIN_SIDE, COARSE_TOL, MAX_COARSE_LEVELS};
-use driver::run;
+pub use coarse::{COARSE_START_MIN_SIDE, COARSE_TOL, MAX_COARSE_LEVELS};
+use driver::{run, Begin};
 use validate::validate;
 
+pub use crate::contact::problem::{CoarseCost, Control, Options, Problem, Solution, DEFAULT_TOL};
 use crate::elastic::kernel::Kernel;
 use crate::elastic::memory;
 use crate::elastic::operator::Operator;
 use crate::error::{Error, Result};
 use crate::grid::Boundary;
-
-/// Default KKT tolerance, relative to the height range.
-pub const DEFAULT_TOL: f64 = 1e-12;
 
 /// Points per reduction chunk: fixed, so the summation order is independent of the thread count.
 pub const CHUNK: usize = 4096;
@@ -244,107 +242,6 @@ const STOP_EVERY: usize = 10;
 /// …and at least this often on grids where ten iterations take long.
 const STOP_INTERVAL: Duration = Duration::from_millis(250);
 
-/// What is imposed.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum Control {
-    /// The approach `Δ ≥ 0` of the flat below the highest point.
-    Approach(f64),
-    /// The mean pressure `p̄ > 0` (`F = p̄·A0`); the approach is an output.
-    MeanPressure(f64),
-}
-
-/// The surface and the elastic model.
-#[derive(Clone, Copy, Debug)]
-pub struct Problem<'a> {
-    /// Row-major `ny × nx` heights.
-    pub heights: &'a [f64],
-    pub ny: usize,
-    pub nx: usize,
-    /// Grid spacing (both axes).
-    pub dx: f64,
-    /// Contact modulus `E* = E/(1 − ν²)`.
-    pub e_star: f64,
-    pub boundary: Boundary,
-}
-
-/// Solver settings.
-#[derive(Clone, Copy)]
-pub struct Options<'a> {
-    /// Stop when the KKT certificate (relative to `h_s`) is `≤ tol`.
-    pub tol: f64,
-    /// Iteration cap; `None` → [`default_max_iter`].
-    pub max_iter: Option<usize>,
-    /// Warm start: a pressure field (`ny × nx`, finite; negative values are clipped to 0).
-    /// In load control it is rescaled to the imposed load.
-    pub initial_pressure: Option<&'a [f64]>,
-    /// Refuse up front with [`Error::TooLarge`] when [`memory::polonsky_keer`] exceeds this (bytes).
-    pub memory_limit: Option<u64>,
-    /// Polled every ~10 iterations (and at least every 0.25 s); `true` → [`Error::Interrupted`].
-    pub should_stop: Option<&'a (dyn Fn() -> bool + Sync)>,
-    /// Precondition the conjugate directions with the periodic inverse compliance
-    /// `E*|q|/2` restricted to the contact set (see the module documentation).
-    pub precondition: bool,
-    /// Start a cold solve from the solution on the grid coarsened by two, recursively
-    /// ([`crate::multilevel`]); ignored with a warm start and on grids smaller than
-    /// [`crate::multilevel::COARSE_START_MIN_SIDE`] per side.
-    pub coarse_start: bool,
-    /// Take chord steps while the contact set changes wholesale (displacement control, see
-    /// the module documentation); `false` keeps every iteration a regular Polonsky–Keer step.
-    pub chord_steps: bool,
-}
-
-impl Default for Options<'_> {
-    fn default() -> Self {
-        Options {
-            tol: DEFAULT_TOL,
-            max_iter: None,
-            initial_pressure: None,
-            memory_limit: None,
-            should_stop: None,
-            precondition: true,
-            coarse_start: true,
-            chord_steps: true,
-        }
-    }
-}
-
-/// A converged contact state.
-#[derive(Clone, Debug)]
-pub struct Solution {
-    pub ny: usize,
-    pub nx: usize,
-    /// Pressure `p ≥ 0`, row-major.
-    pub pressure: Vec<f64>,
-    /// Displacement `u = C p` (fresh product of the returned `p`).
-    pub displacement: Vec<f64>,
-    /// Gap `g = max h − Δ − h + u`, not clamped: contact points carry the residual `|g| ≤ kkt·h_s`.
-    pub gap: Vec<f64>,
-    /// Approach `Δ` (the imposed one, or the computed one in load control).
-    pub approach: f64,
-    /// Conjugate-gradient iterations (each one product `C t`).
-    pub iterations: usize,
-    /// FFT operator applications in total: one per iteration, plus fresh products `C p` (start,
-    /// large set changes, convergence checks) and one for the influence table when no kernel
-    /// table was at hand (periodic [`solve`], [`solve_with_operator`]).
-    pub applies: usize,
-    /// Preconditioner applications (FFT pairs on the unpadded `ny × nx` grid), one per
-    /// preconditioned iteration.
-    pub preconditioner_applies: usize,
-    /// Iterations that were chord steps (included in `iterations`; each one product `C d`).
-    pub chord_steps: usize,
-    /// KKT certificate relative to `h_s` (see the module documentation).
-    pub kkt: f64,
-    /// Number of points with `p > 0`.
-    pub contact_points: usize,
-    /// Total force `F = dx² Σ p`.
-    pub load: f64,
-    /// Mean pressure `p̄ = Σ p / N`.
-    pub mean_pressure: f64,
-    /// What the coarse levels of a coarse start cost (zero without one); not included in
-    /// `iterations`, `applies`, `preconditioner_applies`.
-    pub coarse: CoarseCost,
-}
-
 /// Default iteration cap, `max(5000, ⌈100·N^¼⌉)`. CG iterations grow like `√cond(C)`, and
 /// `cond(C) = O(√N)`: measured on self-affine surfaces (H = 0.9, free, Δ = 0.3 h_s, tol 1e-10)
 /// 52, 89, 112 and 152 iterations at 129², 513², 1025² and 2049², so the cap leaves a margin
@@ -356,8 +253,20 @@ pub fn default_max_iter(n: usize) -> usize {
 
 /// Solve on a new operator built for `problem` (free: Love kernel, zero-padded FFT; periodic:
 /// spectral stiffness).
-pub fn solve(problem: &Problem, control: Control, opts: &Options) -> Result<Solution> {
-    solve_level(problem, control, opts, Finish::Confirmed, MAX_COARSE_LEVELS)
+pub fn solve(
+    problem: &Problem,
+    control: Control,
+    opts: &Options,
+    initial: Option<&[f64]>,
+) -> Result<Solution> {
+    solve_level(
+        problem,
+        control,
+        opts,
+        initial,
+        Finish::Confirmed,
+        MAX_COARSE_LEVELS,
+    )
 }
 
 /// How a solve ends once the certificate on the incrementally updated state meets `tol`.
@@ -376,10 +285,11 @@ pub(crate) fn solve_level(
     problem: &Problem,
     control: Control,
     opts: &Options,
+    initial: Option<&[f64]>,
     finish: Finish,
     levels: usize,
 ) -> Result<Solution> {
-    validate(problem, control, opts)?;
+    validate(problem, control, opts, initial)?;
     let (ny, nx) = (problem.ny, problem.nx);
     if let Some(limit) = opts.memory_limit {
         let bytes = memory::polonsky_keer(ny, nx, problem.boundary);
@@ -396,7 +306,10 @@ pub(crate) fn solve_level(
     }
     // The coarse levels run before the fine operator exists, so their memory is not added
     // to its.
-    let start = coarse_start(problem, control, opts, levels)?;
+    let start = (
+        initial,
+        coarse_start(problem, control, opts, initial, levels)?,
+    );
     match problem.boundary {
         Boundary::Free => {
             // The Love kernel table is the influence table `C e_0` of the sparse corrections:
@@ -425,35 +338,41 @@ fn coarse_start(
     problem: &Problem,
     control: Control,
     opts: &Options,
+    initial: Option<&[f64]>,
     levels: usize,
-) -> Result<Option<(Vec<f64>, CoarseCost)>> {
-    if levels > 0 && coarse::applies_to(problem.ny, problem.nx, opts) {
+) -> Result<CoarseStart> {
+    if levels > 0 && coarse::applies_to(problem.ny, problem.nx, opts, initial) {
         coarse::start(problem, control, opts, levels, |p, c, o, below| {
-            solve_level(p, c, o, Finish::Incremental, below)
+            solve_level(p, c, o, None, Finish::Incremental, below)
         })
     } else {
         Ok(None)
     }
 }
 
-/// [`run`] from a coarse start (if any), reporting its cost.
+/// The prolonged pressure of a coarse start and what its levels cost.
+type CoarseStart = Option<(Vec<f64>, CoarseCost)>;
+
+/// [`run`] from the warm start `initial`, else from the coarse start (reporting its cost), else
+/// from zero.
 fn run_from(
     op: &Operator,
     table: Option<&[f64]>,
     problem: &Problem,
     control: Control,
     opts: &Options,
-    start: Option<(Vec<f64>, CoarseCost)>,
+    start: (Option<&[f64]>, CoarseStart),
     finish: Finish,
 ) -> Result<Solution> {
     match start {
-        Some((p0, cost)) => {
+        (Some(p0), _) => run(op, table, problem, control, opts, Begin::Warm(p0), finish),
+        (None, Some((p0, cost))) => {
             // The start pressure becomes the iterate (no second N-vector).
-            let mut sol = run(op, table, problem, control, opts, Some(p0), finish)?;
+            let mut sol = run(op, table, problem, control, opts, Begin::Coarse(p0), finish)?;
             sol.coarse = cost;
             Ok(sol)
         }
-        None => run(op, table, problem, control, opts, None, finish),
+        (None, None) => run(op, table, problem, control, opts, Begin::Zero, finish),
     }
 }
 
@@ -465,8 +384,9 @@ pub fn solve_with_operator(
     problem: &Problem,
     control: Control,
     opts: &Options,
+    initial: Option<&[f64]>,
 ) -> Result<Solution> {
-    solve_with_kernel(op, None, problem, control, opts)
+    solve_with_kernel(op, None, problem, control, opts, initial)
 }
 
 /// [`solve_with_operator`] with the caller's influence table `C e_0` (row-major `ny × nx`,
@@ -478,8 +398,9 @@ pub fn solve_with_kernel(
     problem: &Problem,
     control: Control,
     opts: &Options,
+    initial: Option<&[f64]>,
 ) -> Result<Solution> {
-    validate(problem, control, opts)?;
+    validate(problem, control, opts, initial)?;
     if let Some(t) = table {
         if t.len() != problem.ny * problem.nx {
             return Err(Error::invalid(
@@ -507,7 +428,10 @@ pub fn solve_with_kernel(
             ),
         ));
     }
-    let start = coarse_start(problem, control, opts, MAX_COARSE_LEVELS)?;
+    let start = (
+        initial,
+        coarse_start(problem, control, opts, initial, MAX_COARSE_LEVELS)?,
+    );
     run_from(op, table, problem, control, opts, start, Finish::Confirmed)
 }
 

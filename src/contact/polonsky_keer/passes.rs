@@ -6,9 +6,16 @@ use std::borrow::Cow;
 
 use rayon::prelude::*;
 
-use super::driver::Mode;
 use super::{CHUNK, SPARSE_MAX};
 use crate::elastic::operator::Operator;
+
+/// What the iteration holds fixed: the approach, or the total `Σ p = p̄ N`.
+#[derive(Clone, Copy, Debug)]
+pub(super) enum Mode {
+    Displacement(f64),
+    /// Target `Σ p = p̄ N`.
+    Load(f64),
+}
 
 /// Partial results of one fused pass over a chunk; combined in chunk order.
 #[derive(Clone, Copy, Debug)]

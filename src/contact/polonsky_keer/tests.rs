@@ -152,7 +152,7 @@ fn matches_dense_exact_solution_free() {
             let delta = frac * (hmax - hmin);
             let b: Vec<f64> = h.iter().map(|&v| delta - (hmax - v)).collect();
             let exact = dense_reference(&c, &b);
-            let s = solve(&pr, Control::Approach(delta), &opts(1e-12)).unwrap();
+            let s = solve(&pr, Control::Approach(delta), &opts(1e-12), None).unwrap();
             let e = max_rel(&s.pressure, &exact);
             assert!(e < 1e-8, "{ny}x{nx} Δ*={frac}: rel err {e}");
             assert!(s.kkt <= 1e-12);
@@ -163,7 +163,13 @@ fn matches_dense_exact_solution_free() {
                 assert!((g - s.gap[i]).abs() < 1e-12 * (hmax - hmin));
             }
             // Load control with the same mean pressure reaches the same state.
-            let l = solve(&pr, Control::MeanPressure(s.mean_pressure), &opts(1e-12)).unwrap();
+            let l = solve(
+                &pr,
+                Control::MeanPressure(s.mean_pressure),
+                &opts(1e-12),
+                None,
+            )
+            .unwrap();
             assert!(max_rel(&l.pressure, &exact) < 1e-8);
             assert!(
                 (l.approach - delta).abs() < 1e-9 * (hmax - hmin),
@@ -198,13 +204,13 @@ fn chord_steps_reach_the_exact_minimiser() {
                     precondition,
                     ..opts(1e-12)
                 };
-                let s = solve(&pr, Control::Approach(delta), &o).unwrap();
+                let s = solve(&pr, Control::Approach(delta), &o, None).unwrap();
                 chords += s.chord_steps;
                 let regular = Options {
                     chord_steps: false,
                     ..o
                 };
-                let r = solve(&pr, Control::Approach(delta), &regular).unwrap();
+                let r = solve(&pr, Control::Approach(delta), &regular, None).unwrap();
                 assert_eq!(r.chord_steps, 0);
                 assert!(max_rel(&r.pressure, &exact) < 1e-8);
                 assert!(s.chord_steps < s.iterations);
@@ -215,10 +221,11 @@ fn chord_steps_reach_the_exact_minimiser() {
                 assert!(e < 1e-8, "seed {seed} Δ*={frac}: rel err {e}");
                 assert!(s.kkt <= 1e-12);
                 // Load control takes no chord steps, so the option changes nothing there.
-                let l = solve(&pr, Control::MeanPressure(s.mean_pressure), &o).unwrap();
+                let l = solve(&pr, Control::MeanPressure(s.mean_pressure), &o, None).unwrap();
                 assert_eq!(l.chord_steps, 0);
                 assert!(max_rel(&l.pressure, &exact) < 1e-8);
-                let lr = solve(&pr, Control::MeanPressure(s.mean_pressure), &regular).unwrap();
+                let lr =
+                    solve(&pr, Control::MeanPressure(s.mean_pressure), &regular, None).unwrap();
                 assert_eq!((l.iterations, l.applies), (lr.iterations, lr.applies));
                 assert_eq!(l.pressure, lr.pressure);
             }
@@ -247,8 +254,8 @@ fn preconditioned_and_plain_reach_the_same_minimiser() {
                 precondition: false,
                 ..opts(1e-12)
             };
-            let a = solve(&pr, Control::Approach(delta), &opts(1e-12)).unwrap();
-            let b = solve(&pr, Control::Approach(delta), &plain).unwrap();
+            let a = solve(&pr, Control::Approach(delta), &opts(1e-12), None).unwrap();
+            let b = solve(&pr, Control::Approach(delta), &plain, None).unwrap();
             used += a.preconditioner_applies;
             assert_eq!(b.preconditioner_applies, 0);
             let ca: Vec<bool> = a.pressure.iter().map(|&p| p > 0.0).collect();
@@ -282,11 +289,11 @@ fn coarse_start_and_cold_start_reach_the_same_minimiser() {
             coarse_start: false,
             ..opts(1e-12)
         };
-        let mid = solve(&pr, Control::Approach(0.3 * top), &cold).unwrap();
+        let mid = solve(&pr, Control::Approach(0.3 * top), &cold, None).unwrap();
         controls.push(Control::MeanPressure(mid.mean_pressure));
         for control in controls {
-            let a = solve(&pr, control, &opts(1e-12)).unwrap();
-            let b = solve(&pr, control, &cold).unwrap();
+            let a = solve(&pr, control, &opts(1e-12), None).unwrap();
+            let b = solve(&pr, control, &cold, None).unwrap();
             assert_eq!(b.coarse, CoarseCost::default());
             // Two levels, or one when nothing touches on the coarsest (its highest node
             // is lower than the fine summit).
@@ -309,18 +316,21 @@ fn coarse_start_and_cold_start_reach_the_same_minimiser() {
     }
     // A warm start or a small grid skips the coarse levels.
     let pr = problem(&h, ny, nx, Boundary::Free);
-    let first = solve(&pr, Control::Approach(0.1), &Options::default()).unwrap();
-    let warm = Options {
-        initial_pressure: Some(&first.pressure),
-        ..Options::default()
-    };
-    let s = solve(&pr, Control::Approach(0.2), &warm).unwrap();
+    let first = solve(&pr, Control::Approach(0.1), &Options::default(), None).unwrap();
+    let s = solve(
+        &pr,
+        Control::Approach(0.2),
+        &Options::default(),
+        Some(&first.pressure),
+    )
+    .unwrap();
     assert_eq!(s.coarse, CoarseCost::default());
     let small = rough(40, 70, 3);
     let s = solve(
         &problem(&small, 40, 70, Boundary::Free),
         Control::Approach(0.1),
         &Options::default(),
+        None,
     )
     .unwrap();
     assert_eq!(s.coarse.levels, 0);
@@ -339,7 +349,8 @@ fn matches_dense_exact_solution_periodic() {
         let delta = frac * limit;
         let b: Vec<f64> = h.iter().map(|&v| delta - (hmax - v)).collect();
         let exact = dense_reference(&c, &b);
-        let s = solve_with_operator(&op, &pr, Control::Approach(delta), &opts(1e-12)).unwrap();
+        let s =
+            solve_with_operator(&op, &pr, Control::Approach(delta), &opts(1e-12), None).unwrap();
         let e = max_rel(&s.pressure, &exact);
         assert!(e < 1e-8, "Δ={frac}·limit: rel err {e}");
         let l = solve_with_operator(
@@ -347,6 +358,7 @@ fn matches_dense_exact_solution_periodic() {
             &pr,
             Control::MeanPressure(s.mean_pressure),
             &opts(1e-12),
+            None,
         )
         .unwrap();
         assert!(max_rel(&l.pressure, &exact) < 1e-8);
@@ -365,7 +377,7 @@ fn certificate_meets_tolerance_and_is_honest() {
             (Control::Approach(0.2), 1e-8),
             (Control::MeanPressure(0.02), DEFAULT_TOL),
         ] {
-            let s = solve(&pr, control, &opts(tol)).unwrap();
+            let s = solve(&pr, control, &opts(tol), None).unwrap();
             assert!(s.kkt <= tol, "{boundary:?} {control:?}: {}", s.kkt);
             let (hmax, hmin, _) = height_stats(&h);
             // The documented scale: max(h_s, Δ), or max(h_s, |Δ|, p̄·C_00) under a load.
@@ -400,8 +412,14 @@ fn load_control_reaches_displacement_state() {
     for boundary in [Boundary::Free, Boundary::Periodic] {
         let pr = problem(&h, ny, nx, boundary);
         let delta = 0.3 * (hmax - hmin);
-        let d = solve(&pr, Control::Approach(delta), &opts(1e-12)).unwrap();
-        let l = solve(&pr, Control::MeanPressure(d.mean_pressure), &opts(1e-12)).unwrap();
+        let d = solve(&pr, Control::Approach(delta), &opts(1e-12), None).unwrap();
+        let l = solve(
+            &pr,
+            Control::MeanPressure(d.mean_pressure),
+            &opts(1e-12),
+            None,
+        )
+        .unwrap();
         assert!(max_rel(&l.pressure, &d.pressure) < 1e-8);
         assert!((l.approach - delta).abs() < 1e-9 * (hmax - hmin));
         assert!((l.mean_pressure - d.mean_pressure).abs() < 1e-12 * d.mean_pressure);
@@ -428,7 +446,13 @@ fn periodic_westergaard() {
     };
     let p_star = PI * e_star * amp / lambda;
     for ratio in [0.1, 0.25, 0.5, 0.75, 0.9] {
-        let s = solve(&pr, Control::MeanPressure(ratio * p_star), &opts(1e-11)).unwrap();
+        let s = solve(
+            &pr,
+            Control::MeanPressure(ratio * p_star),
+            &opts(1e-11),
+            None,
+        )
+        .unwrap();
         assert_eq!(s.contact_points % ny, 0);
         let a = (s.contact_points / ny) as f64 * dx / 2.0;
         let a_exact = lambda / PI * ratio.sqrt().asin();
@@ -436,14 +460,26 @@ fn periodic_westergaard() {
         assert!(e < 0.01, "p̄/p* = {ratio}: a = {a}, exact {a_exact} ({e})");
     }
     // Full contact starts at p*: just below, a gap remains; just above, none.
-    let below = solve(&pr, Control::MeanPressure(0.99 * p_star), &opts(1e-11)).unwrap();
+    let below = solve(
+        &pr,
+        Control::MeanPressure(0.99 * p_star),
+        &opts(1e-11),
+        None,
+    )
+    .unwrap();
     assert!(below.contact_points < ny * nx);
-    let above = solve(&pr, Control::MeanPressure(1.01 * p_star), &opts(1e-11)).unwrap();
+    let above = solve(
+        &pr,
+        Control::MeanPressure(1.01 * p_star),
+        &opts(1e-11),
+        None,
+    )
+    .unwrap();
     assert_eq!(above.contact_points, ny * nx);
     assert!((above.approach - amp).abs() < 1e-9 * amp);
     // Displacement control at the limit Δ = max h − mean h returns the full-contact
     // state at its onset, p̄ = p*; beyond it is an error, not a hang.
-    let s = solve(&pr, Control::Approach(amp), &opts(1e-11)).unwrap();
+    let s = solve(&pr, Control::Approach(amp), &opts(1e-11), None).unwrap();
     assert!(s.kkt <= 1e-11);
     assert!(
         (s.mean_pressure - p_star).abs() < 1e-6 * p_star,
@@ -453,7 +489,7 @@ fn periodic_westergaard() {
     // Near the trough p and g both vanish; the certificate bounds −g and g on I_c, and the
     // few free trough points are left with gaps of the same order.
     assert!(s.gap.iter().all(|g| g.abs() <= 1e-9 * 2.0 * amp));
-    match solve(&pr, Control::Approach(1.01 * amp), &opts(1e-11)) {
+    match solve(&pr, Control::Approach(1.01 * amp), &opts(1e-11), None) {
         Err(Error::InvalidArgument { name, message }) => {
             assert_eq!(name, "approach");
             assert!(message.contains("0.01"), "{message}");
@@ -472,7 +508,7 @@ fn one_and_two_threads_agree() {
             .num_threads(threads)
             .build()
             .unwrap()
-            .install(|| solve(&pr, control, &Options::default()).unwrap())
+            .install(|| solve(&pr, control, &Options::default(), None).unwrap())
     };
     for control in [Control::Approach(0.1), Control::MeanPressure(0.01)] {
         let a = run(1, control);
@@ -492,21 +528,13 @@ fn warm_start_agrees_with_cold() {
     let hs = hmax - hmin;
     for boundary in [Boundary::Free, Boundary::Periodic] {
         let pr = problem(&h, ny, nx, boundary);
-        let first = solve(&pr, Control::Approach(0.2 * hs), &Options::default()).unwrap();
+        let first = solve(&pr, Control::Approach(0.2 * hs), &Options::default(), None).unwrap();
         for control in [
             Control::Approach(0.3 * hs),
             Control::MeanPressure(1.5 * first.mean_pressure),
         ] {
-            let cold = solve(&pr, control, &Options::default()).unwrap();
-            let warm = solve(
-                &pr,
-                control,
-                &Options {
-                    initial_pressure: Some(&first.pressure),
-                    ..Options::default()
-                },
-            )
-            .unwrap();
+            let cold = solve(&pr, control, &Options::default(), None).unwrap();
+            let warm = solve(&pr, control, &Options::default(), Some(&first.pressure)).unwrap();
             assert!(warm.kkt <= DEFAULT_TOL && cold.kkt <= DEFAULT_TOL);
             // A gap residual ε·h_s moves p by about ε·h_s/C_00 relative to p ~ Δ/C_00.
             assert!(
@@ -526,7 +554,7 @@ fn trivial_states() {
     for boundary in [Boundary::Free, Boundary::Periodic] {
         let pr = problem(&h, ny, nx, boundary);
         // Δ = 0: nothing is pressed, p = 0 without iterating.
-        let s = solve(&pr, Control::Approach(0.0), &Options::default()).unwrap();
+        let s = solve(&pr, Control::Approach(0.0), &Options::default(), None).unwrap();
         assert_eq!(s.iterations, 0);
         assert!(s.pressure.iter().all(|&v| v == 0.0));
         assert_eq!(s.kkt, 0.0);
@@ -534,19 +562,20 @@ fn trivial_states() {
     // A flat surface: free punch (displacement and load control agree).
     let flat = vec![0.5; ny * nx];
     let pr = problem(&flat, ny, nx, Boundary::Free);
-    let d = solve(&pr, Control::Approach(0.1), &Options::default()).unwrap();
+    let d = solve(&pr, Control::Approach(0.1), &Options::default(), None).unwrap();
     assert_eq!(d.contact_points, ny * nx);
     let l = solve(
         &pr,
         Control::MeanPressure(d.mean_pressure),
         &Options::default(),
+        None,
     )
     .unwrap();
     assert!((l.approach - 0.1).abs() < 1e-8);
     // One point.
     let one = [3.0];
     let pr = problem(&one, 1, 1, Boundary::Free);
-    let s = solve(&pr, Control::MeanPressure(2.0), &Options::default()).unwrap();
+    let s = solve(&pr, Control::MeanPressure(2.0), &Options::default(), None).unwrap();
     assert!((s.pressure[0] - 2.0).abs() < 1e-12);
 }
 
@@ -564,20 +593,25 @@ fn bad_inputs_are_errors() {
     let mut hn = h.clone();
     hn[7] = f64::NAN;
     assert_eq!(
-        name(solve(&problem(&hn, ny, nx, Boundary::Free), d, &o)),
+        name(solve(&problem(&hn, ny, nx, Boundary::Free), d, &o, None)),
         "heights"
     );
     assert_eq!(
-        name(solve(&problem(&h[1..], ny, nx, Boundary::Free), d, &o)),
+        name(solve(
+            &problem(&h[1..], ny, nx, Boundary::Free),
+            d,
+            &o,
+            None
+        )),
         "heights"
     );
     assert_eq!(
-        name(solve(&problem(&[], 0, 5, Boundary::Free), d, &o)),
+        name(solve(&problem(&[], 0, 5, Boundary::Free), d, &o, None)),
         "heights"
     );
-    assert_eq!(name(solve(&Problem { dx: 0.0, ..pr }, d, &o)), "dx");
+    assert_eq!(name(solve(&Problem { dx: 0.0, ..pr }, d, &o, None)), "dx");
     assert_eq!(
-        name(solve(&Problem { e_star: -1.0, ..pr }, d, &o)),
+        name(solve(&Problem { e_star: -1.0, ..pr }, d, &o, None)),
         "e_star"
     );
     assert_eq!(
@@ -587,52 +621,51 @@ fn bad_inputs_are_errors() {
                 ..pr
             },
             d,
-            &o
+            &o,
+            None
         )),
         "e_star"
     );
-    assert_eq!(name(solve(&pr, Control::Approach(-0.1), &o)), "approach");
     assert_eq!(
-        name(solve(&pr, Control::Approach(f64::INFINITY), &o)),
+        name(solve(&pr, Control::Approach(-0.1), &o, None)),
         "approach"
     );
     assert_eq!(
-        name(solve(&pr, Control::MeanPressure(0.0), &o)),
+        name(solve(&pr, Control::Approach(f64::INFINITY), &o, None)),
+        "approach"
+    );
+    assert_eq!(
+        name(solve(&pr, Control::MeanPressure(0.0), &o, None)),
         "mean_pressure"
     );
     assert_eq!(
-        name(solve(&pr, Control::MeanPressure(f64::NAN), &o)),
+        name(solve(&pr, Control::MeanPressure(f64::NAN), &o, None)),
         "mean_pressure"
     );
-    assert_eq!(name(solve(&pr, d, &opts(0.0))), "tol");
-    assert_eq!(name(solve(&pr, d, &opts(f64::NAN))), "tol");
+    assert_eq!(name(solve(&pr, d, &opts(0.0), None)), "tol");
+    assert_eq!(name(solve(&pr, d, &opts(f64::NAN), None)), "tol");
     let short = vec![0.0; 3];
-    let bad_init = Options {
-        initial_pressure: Some(&short),
-        ..Options::default()
-    };
-    assert_eq!(name(solve(&pr, d, &bad_init)), "initial_pressure");
+    assert_eq!(name(solve(&pr, d, &o, Some(&short))), "initial_pressure");
     let mut nan_init = vec![0.0; ny * nx];
     nan_init[0] = f64::NAN;
-    let bad_init = Options {
-        initial_pressure: Some(&nan_init),
-        ..Options::default()
-    };
-    assert_eq!(name(solve(&pr, d, &bad_init)), "initial_pressure");
+    assert_eq!(name(solve(&pr, d, &o, Some(&nan_init))), "initial_pressure");
     let op = Operator::periodic(ny, nx, pr.dx, pr.e_star);
-    assert_eq!(name(solve_with_operator(&op, &pr, d, &o)), "operator");
+    assert_eq!(name(solve_with_operator(&op, &pr, d, &o, None)), "operator");
 
     // Memory limit, iteration cap, interruption.
     let small = Options {
         memory_limit: Some(1000),
         ..Options::default()
     };
-    assert!(matches!(solve(&pr, d, &small), Err(Error::TooLarge { .. })));
+    assert!(matches!(
+        solve(&pr, d, &small, None),
+        Err(Error::TooLarge { .. })
+    ));
     let capped = Options {
         max_iter: Some(1),
         ..opts(1e-14)
     };
-    match solve(&pr, Control::Approach(0.3), &capped) {
+    match solve(&pr, Control::Approach(0.3), &capped, None) {
         Err(Error::NotConverged {
             iterations, what, ..
         }) => {
@@ -651,7 +684,7 @@ fn bad_inputs_are_errors() {
         ..Options::default()
     };
     assert_eq!(
-        solve(&pr, Control::Approach(0.3), &interrupt).unwrap_err(),
+        solve(&pr, Control::Approach(0.3), &interrupt, None).unwrap_err(),
         Error::Interrupted
     );
     assert_eq!(calls.load(std::sync::atomic::Ordering::Relaxed), 1);
@@ -752,8 +785,8 @@ fn caller_kernel_table_and_incremental_finish() {
         for f in [0.2, 0.5] {
             let control = Control::Approach(f * top);
             let o = opts(1e-12);
-            let a = solve_with_operator(&op, &pr, control, &o).unwrap();
-            let b = solve_with_kernel(&op, Some(&table), &pr, control, &o).unwrap();
+            let a = solve_with_operator(&op, &pr, control, &o, None).unwrap();
+            let b = solve_with_kernel(&op, Some(&table), &pr, control, &o, None).unwrap();
             let ca: Vec<bool> = a.pressure.iter().map(|&p| p > 0.0).collect();
             let cb: Vec<bool> = b.pressure.iter().map(|&p| p > 0.0).collect();
             assert_eq!(ca, cb, "{boundary:?} {f}");
@@ -764,16 +797,22 @@ fn caller_kernel_table_and_incremental_finish() {
             // An incremental finish stops on the updated state: the same contact set at a
             // looser tolerance, no confirming product, no displacement unless fresh.
             let loose = opts(1e-6);
-            let c = solve_level(&pr, control, &loose, Finish::Confirmed, 0).unwrap();
-            let d = solve_level(&pr, control, &loose, Finish::Incremental, 0).unwrap();
+            let c = solve_level(&pr, control, &loose, None, Finish::Confirmed, 0).unwrap();
+            let d = solve_level(&pr, control, &loose, None, Finish::Incremental, 0).unwrap();
             assert!(d.applies <= c.applies);
             assert_eq!(c.iterations, d.iterations);
             assert_eq!(c.pressure, d.pressure);
             assert!(d.displacement.is_empty() || d.displacement == c.displacement);
         }
         let short = vec![0.0; ny * nx - 1];
-        assert!(
-            solve_with_kernel(&op, Some(&short), &pr, Control::Approach(0.1), &opts(1e-8)).is_err()
-        );
+        assert!(solve_with_kernel(
+            &op,
+            Some(&short),
+            &pr,
+            Control::Approach(0.1),
+            &opts(1e-8),
+            None
+        )
+        .is_err());
     }
 }

@@ -6,7 +6,12 @@ use super::{Control, Options, Problem};
 use crate::error::{Error, Result};
 use crate::grid::check_shape;
 
-pub(super) fn validate(problem: &Problem, control: Control, opts: &Options) -> Result<()> {
+pub(super) fn validate(
+    problem: &Problem,
+    control: Control,
+    opts: &Options,
+    initial: Option<&[f64]>,
+) -> Result<()> {
     let (ny, nx) = (problem.ny, problem.nx);
     check_shape(ny, nx)?;
     let n = ny
@@ -65,7 +70,7 @@ pub(super) fn validate(problem: &Problem, control: Control, opts: &Options) -> R
             ),
         ));
     }
-    if let Some(p0) = opts.initial_pressure {
+    if let Some(p0) = initial {
         if p0.len() != n {
             return Err(Error::invalid(
                 "initial_pressure",
