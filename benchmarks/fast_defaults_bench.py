@@ -53,7 +53,6 @@ import numpy as np
 from large_grid_bench import available, machine  # noqa: E402
 
 import leakpath
-from leakpath import _core
 from leakpath.contact import ContactProblem
 
 RESULTS = Path(__file__).parent / "results"
@@ -102,14 +101,15 @@ def leakpath_solves(h, approaches, *, precondition=True):
     its = applies = pre = 0
     t0 = time.perf_counter()
     for a in approaches:
-        out = _core.solve_polonsky_keer(
-            prob._h, 1.0, 1.0, "free", approach=a, tol=1e-12, initial_pressure=prev,
-            precondition=precondition, operator_of=prob._core,
+        start = {"start": "cold"} if prev is None else {
+            "start": "pressure", "initial_pressure": prev}
+        out = prob._core.solve(
+            approach=a, solver="polonsky-keer", tol=1e-12, precondition=precondition, **start
         )
-        prev = out["pressure"]
-        its += out["iterations"]
-        applies += out["applies"]
-        pre += out["preconditioner_applies"]
+        prev = out.pressure
+        its += out.iterations
+        applies += out.fft_products
+        pre += out.preconditioner_products
     return time.perf_counter() - t0, its, applies, pre
 
 
@@ -273,7 +273,6 @@ CHILD = r"""
 import json, resource, sys, time
 import numpy as np
 import leakpath
-from leakpath import _core
 from leakpath.contact import ContactProblem
 n, frac = int(sys.argv[1]), float(sys.argv[2])
 pre, coarse = sys.argv[3] == "1", sys.argv[4] == "1"
@@ -295,20 +294,19 @@ t_apply = (time.perf_counter() - t0) / 3
 del p
 hs = h.max() - h.min()
 t0 = time.perf_counter()
-out = _core.solve_polonsky_keer(h, 1.0, 1.0, "free", approach=frac * hs, tol=1e-8,
-                                precondition=pre, operator_of=prob._core, coarse_start=coarse,
-                                chord_steps=chords)
+out = prob._core.solve(approach=frac * hs, solver="polonsky-keer", tol=1e-8,
+                       precondition=pre, coarse_start=coarse, chord_steps=chords)
 dt = time.perf_counter() - t0
 print(json.dumps({
-    "seconds": dt, "iterations": out["iterations"], "applies": out["applies"],
-    "chord": out["chord_steps"],
-    "pre": out["preconditioner_applies"], "contact_fraction": out["contact_points"] / h.size,
-    "free_volume": float(out["gap"].sum()), "apply_ms": t_apply * 1e3,
+    "seconds": dt, "iterations": out.iterations, "applies": out.fft_products,
+    "chord": out.chord_steps,
+    "pre": out.preconditioner_products, "contact_fraction": out.contact_points / h.size,
+    "free_volume": float(out.gap.sum()), "apply_ms": t_apply * 1e3,
     "peak_MiB": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
-    "coarse_levels": out["coarse_levels"], "coarse_applies": out["coarse_applies"],
-    "coarse_equiv": out["coarse_applies_fine_equivalent"],
-    "coarse_pre": out["coarse_preconditioner_applies"],
-    "coarse_pre_equiv": out["coarse_preconditioner_fine_equivalent"],
+    "coarse_levels": out.coarse.levels, "coarse_applies": out.coarse.fft_products,
+    "coarse_equiv": out.coarse.fft_products_fine_equivalent,
+    "coarse_pre": out.coarse.preconditioner_products,
+    "coarse_pre_equiv": out.coarse.preconditioner_products_fine_equivalent,
 }))
 """
 

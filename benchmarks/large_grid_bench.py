@@ -47,8 +47,10 @@ def self_affine(n: int, seed: int = 0) -> np.ndarray:
 
 def leakpath_pk(h, approach=None, mean_pressure=None, boundary="free"):
     t0 = time.perf_counter()
-    out = _core.solve_polonsky_keer(
-        h, 1.0, 1.0, boundary, approach=approach, mean_pressure=mean_pressure, tol=TOL
+    # The whole call a user makes: the problem (kernel, operator) and one Polonsky–Keer solve.
+    prob = _core.ContactProblem(h, 1.0, 1.0, boundary)
+    out = prob.solve(
+        approach=approach, mean_pressure=mean_pressure, solver="polonsky-keer", tol=TOL
     )
     dt = time.perf_counter() - t0
     return dt, out
@@ -154,10 +156,11 @@ def peak_4097() -> dict:
         "h = leakpath.rmd(12, 2.1, seed=0).heights\n"
         "hs = h.max() - h.min()\n"
         "t = time.perf_counter()\n"
-        f"out = _core.solve_polonsky_keer(h, 1.0, 1.0, 'free', approach=0.3 * hs, tol={TOL})\n"
+        "out = _core.ContactProblem(h, 1.0, 1.0, 'free').solve(\n"
+        f"    approach=0.3 * hs, solver='polonsky-keer', tol={TOL})\n"
         "t = time.perf_counter() - t\n"
-        "print(json.dumps({'seconds': t, 'iterations': out['iterations'],"
-        " 'contact_fraction': out['contact_points'] / h.size,"
+        "print(json.dumps({'seconds': t, 'iterations': out.iterations,"
+        " 'contact_fraction': out.contact_points / h.size,"
         " 'peak_MiB': resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}))\n"
     )
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
@@ -197,8 +200,8 @@ def main() -> None:
         for frac in (0.1, 0.3, 0.6):
             a = frac * hs
             t_lp, o_lp = median_time(lambda h=h, a=a: leakpath_pk(h, approach=a), rep)
-            a_lp = o_lp["contact_points"] / h.size
-            v_lp = float(o_lp["gap"].sum())
+            a_lp = o_lp.contact_points / h.size
+            v_lp = float(o_lp.gap.sum())
             if available("ContactMechanics"):
                 t_cm, o_cm = median_time(lambda h=h, a=a: cm_free(h, a), 1 if n > 513 else rep)
                 row = (
@@ -224,12 +227,12 @@ def main() -> None:
         h = self_affine(n, seed=1)
         limit = h.max() - h.mean()
         _, ref = leakpath_pk(h, approach=0.3 * limit, boundary="periodic")
-        pm = float(ref["mean_pressure"])
+        pm = float(ref.mean_pressure)
         t_lp, o_lp = median_time(
             lambda h=h, pm=pm: leakpath_pk(h, mean_pressure=pm, boundary="periodic"), rep
         )
         cells = [f"{t_lp:.2f} s"]
-        fracs = [f"{o_lp['contact_points'] / h.size:.6f}"]
+        fracs = [f"{o_lp.contact_points / h.size:.6f}"]
         others = []
         for name, fn in (("ContactMechanics", cm_periodic), ("tamaas", tamaas_periodic)):
             if available(name):
@@ -272,7 +275,7 @@ def main() -> None:
             h = self_affine(n)
             hs = h.max() - h.min()
             t, o = leakpath_pk(h, approach=0.3 * hs)
-            iterations = o["iterations"]
+            iterations = o.iterations
         per = 1e3 * t / max(iterations, 1)
         row = (
             f"| {n}² | {N} | {iterations} | {t:.2f} s | {per:.2f} |"

@@ -14,41 +14,72 @@ AUTO_ACTIVE_SET_MAX_POINTS: int
 
 _F64 = npt.NDArray[np.float64]
 
-class _SolveFields(_TypedDict):
-    """The fields every contact solve returns. The same field has the same name in every
-    result: ``contact_points`` is ``#(p > 0)``, ``applies`` the FFT products. ``coarse_*``: the
-    coarse-to-fine start of a cold Polonsky–Keer solve (raw counts on the coarse grids, and
-    their sum weighted by each grid's share of the points); zero otherwise."""
+class CoarseCost:
+    """What the coarse levels of a cold Polonsky–Keer start cost (all zero without one; not
+    included in the fine counts of :class:`ContactSolution`): raw counts on the coarse grids,
+    and the products weighted by each grid's share of the points (``Σ count · N_level / N``)."""
 
-    pressure: _F64
-    displacement: _F64
-    gap: _F64
-    approach: float
-    iterations: int
-    applies: int
-    preconditioner_applies: int
-    coarse_levels: int
-    coarse_iterations: int
-    coarse_applies: int
-    coarse_preconditioner_applies: int
-    coarse_applies_fine_equivalent: float
-    coarse_preconditioner_fine_equivalent: float
-    kkt: float
-    contact_points: int
-    seconds: float
+    @property
+    def levels(self) -> int: ...
+    @property
+    def iterations(self) -> int: ...
+    @property
+    def fft_products(self) -> int: ...
+    @property
+    def preconditioner_products(self) -> int: ...
+    @property
+    def fft_products_fine_equivalent(self) -> float: ...
+    @property
+    def preconditioner_products_fine_equivalent(self) -> float: ...
 
-class ContactResult(_SolveFields):
-    """One contact solve, whichever solver ran: the common fields and the solver that ran."""
+class ContactSolution:
+    """One contact solve, whichever solver ran (read-only; the core's ``contact::Solution``
+    under the same names). Grids are ``(ny, nx)`` float64; the gap is not clamped."""
 
-    solver: _Literal["polonsky-keer", "active-set", "lawson-hanson"]
-
-class PolonskyKeerResult(_SolveFields):
-    """:func:`solve_polonsky_keer`: the common fields plus the load, and how many of the
-    iterations were chord steps (each one product of the whole pressure change)."""
-
-    load: float
-    mean_pressure: float
-    chord_steps: int
+    @property
+    def solver(self) -> _Literal["polonsky-keer", "active-set", "lawson-hanson"]:
+        """The solver that ran (``"auto"`` resolved)."""
+    @property
+    def pressure(self) -> _F64:
+        """Contact pressure ``p ≥ 0`` [units of ``E``]."""
+    @property
+    def displacement(self) -> _F64:
+        """``u = C p`` [length]."""
+    @property
+    def gap(self) -> _F64:
+        """``g = max h − Δ − h + u`` [length]."""
+    @property
+    def approach(self) -> float:
+        """``Δ`` [length]: imposed, or computed under load control."""
+    @property
+    def iterations(self) -> int: ...
+    @property
+    def fft_products(self) -> int:
+        """Operator applications ``C x`` (FFT pairs of the padded grid); 0 for the exact
+        solvers."""
+    @property
+    def preconditioner_products(self) -> int:
+        """Preconditioner applications (FFT pairs on the unpadded grid)."""
+    @property
+    def chord_steps(self) -> int:
+        """Iterations taken as chord steps (included in ``iterations``)."""
+    @property
+    def kkt(self) -> float:
+        """KKT certificate relative to the height range."""
+    @property
+    def contact_points(self) -> int:
+        """``#(p > 0)``."""
+    @property
+    def load(self) -> float:
+        """``F = dx² Σ p`` [pressure · length²]."""
+    @property
+    def mean_pressure(self) -> float:
+        """``p̄ = Σ p / N`` [units of ``E``]."""
+    @property
+    def coarse(self) -> CoarseCost: ...
+    @property
+    def seconds(self) -> float:
+        """Wall time of the solve [s]."""
 
 class ClusterResult(_TypedDict):
     """:func:`classify_clusters`."""
@@ -101,66 +132,6 @@ def kernel_table(
     (default :func:`leakpath._memory.memory_limit`) or overflow.
     """
 
-# ---- polonsky-keer ----
-def solve_polonsky_keer(
-    heights: npt.NDArray[np.float64],
-    dx: float,
-    e_star: float,
-    boundary: _Literal["free", "periodic"] = "free",
-    approach: float | None = None,
-    mean_pressure: float | None = None,
-    tol: float | None = None,
-    max_iter: int | None = None,
-    initial_pressure: npt.NDArray[np.float64] | None = None,
-    memory_limit: int | None = None,
-    precondition: bool = True,
-    operator_of: ContactProblem | None = None,
-    coarse_start: bool = True,
-    chord_steps: bool = True,
-) -> PolonskyKeerResult:
-    """Normal contact of an elastic rough surface against a rigid flat, Polonsky–Keer CG.
-
-    Finds ``p ≥ 0`` with gap ``g = max(h) − Δ − h + u ≥ 0``, ``p·g = 0``, ``u = C p`` (FFT
-    influence operator, ``boundary`` "free" or "periodic"). Give exactly one of
-
-    - ``approach`` ``Δ ≥ 0`` (displacement control; periodic: ``Δ ≤ max h − mean h``, where
-      full contact is reached — at the limit the full-contact state with ``min p = 0`` is
-      returned, beyond it ``ValueError``), or
-    - ``mean_pressure`` ``p̄ > 0`` (load control, ``F = p̄·A0``, ``A0 = ny·nx·dx²``); the
-      returned approach is ``Δ = mean over the contact set of (max h − h + u)``, positive when
-      the flat has moved down from first touch.
-
-    ``heights``: float64 array ``(ny, nx)``, finite. ``tol``: stop when the KKT certificate
-    ``max(−min g, max_{p>0} |g|, Σ p|g| / Σ p) / (max h − min h)`` is ``≤ tol`` (default
-    ``1e-12``). ``max_iter``: default ``max(5000, ⌈100·N^¼⌉)``; exceeding it raises
-    ``RuntimeError``. ``initial_pressure``: warm start (same shape; negatives clipped; rescaled
-    to the load in load control); cold start is ``p = 0`` (displacement) or uniform ``p̄``
-    (load). ``memory_limit`` (bytes, default :func:`leakpath._memory.memory_limit`):
-    ``ProblemTooLargeError`` (a ``MemoryError``) up front when the solve would need more, or
-    when an allocation fails. The GIL is released; Ctrl-C raises ``KeyboardInterrupt`` within
-    a fraction of a second. ``precondition``: FFT-preconditioned conjugate steps (inverse
-    half-space compliance ``E*|q|/2`` on the contact set). ``operator_of``: reuse the operator
-    of a :class:`ContactProblem` of the same grid. ``coarse_start``: a cold solve (no
-    ``initial_pressure``) on a grid of at least 64 points per side starts from the solution on
-    the grid coarsened by two (every other node, ``2·dx``, solved the same way, at most two
-    levels deep and not below 64 points per side, to KKT ``1e-2``), prolonged bilinearly; the
-    answer is the same minimiser. ``chord_steps`` (displacement control): while an iteration
-    truncates or adds more than 0.5 % of the contact set, the next one is a chord step (the
-    projected trial step's whole change gets one FFT product and an exact line search on the
-    chord) instead of a conjugate step followed by a fresh product; ``False`` keeps every
-    iteration a regular Polonsky–Keer step. The answer is the same minimiser.
-
-    Returns a dict: ``pressure``, ``displacement``, ``gap`` (``(ny, nx)`` float64; the gap is
-    not clamped), ``approach``, ``iterations`` (CG steps), ``applies`` (FFT convolutions),
-    ``preconditioner_applies``, ``chord_steps`` (iterations taken as chord steps), ``kkt``,
-    ``load`` (``F = dx² Σ p``), ``mean_pressure``,
-    ``contact_points`` (``#(p > 0)``), ``seconds``, and the cost of the coarse levels (0
-    without a coarse start; not included in the counts above): ``coarse_levels``,
-    ``coarse_iterations``, ``coarse_applies``, ``coarse_preconditioner_applies`` (raw, each
-    on its own grid), ``coarse_applies_fine_equivalent``,
-    ``coarse_preconditioner_fine_equivalent`` (``Σ count · N_level / N``).
-    """
-
 class ContactProblem:
     """An elastic rough surface against a rigid flat: Love kernel, FFT operator and the
     Lawson–Hanson Cholesky factor, kept across solves (gap ``g = max h − Δ − h + C p``)."""
@@ -182,8 +153,6 @@ class ContactProblem:
         """Displacement ``u = C p`` by FFT, shape ``(ny, nx)``."""
     def block(self, indices: npt.NDArray[np.int64]) -> npt.NDArray[np.float64]:
         """Dense block ``C_PP`` for flat indices (free-boundary Love coefficients)."""
-    def resolve_solver(self, solver: str = "auto", load_control: bool = False) -> str:
-        """The solver ``solver`` runs on this grid (the ``auto`` policy)."""
     def solve(
         self,
         approach: float | None = None,
@@ -195,7 +164,10 @@ class ContactProblem:
         tol: float = 1e-12,
         max_iter: int | None = None,
         threads: int | None = None,
-    ) -> ContactResult:
+        precondition: bool = True,
+        coarse_start: bool = True,
+        chord_steps: bool = True,
+    ) -> ContactSolution:
         """Solve at ``approach`` or at ``mean_pressure`` (exactly one; the exact solvers take
         the approach only). ``start``: ``"cold"`` (p = 0), ``"previous"`` (this problem's
         last solve: Polonsky–Keer from its pressure, the exact solvers from their kept
@@ -205,7 +177,27 @@ class ContactProblem:
         :data:`AUTO_ACTIVE_SET_MAX_POINTS` points in displacement control, Polonsky–Keer
         otherwise; ``solver`` in the result names the one that ran. ``threads``: run on a
         pool of that many threads (1: the calling thread's own one-thread pool; default: the
-        solver pool); the result does not depend on it."""
+        solver pool); the result does not depend on it.
+
+        Polonsky–Keer finds ``p ≥ 0`` with ``g ≥ 0``, ``p·g = 0`` by constrained conjugate
+        gradients on the FFT operator. Displacement control fixes ``Δ ≥ 0`` (periodic:
+        ``Δ ≤ max h − mean h``, where full contact is reached: at the limit the full-contact
+        state with ``min p = 0`` is returned, beyond it ``ValueError``); load control fixes
+        ``p̄ > 0`` (``F = p̄·A0``) and returns ``Δ = mean over the contact set of
+        (max h − h + u)``. ``tol``: stop when the KKT certificate
+        ``max(−min g, max_{p>0} |g|, Σ p|g| / Σ p) / (max h − min h)`` is ``≤ tol``.
+        ``max_iter``: default ``max(5000, ⌈100·N^¼⌉)`` (Polonsky–Keer), ``50 N + 1000``
+        (exact solvers); exceeding it raises ``RuntimeError``. Three settings tune
+        Polonsky–Keer and leave the answer the same minimiser: ``precondition`` (conjugate
+        steps preconditioned with the inverse half-space compliance ``E*|q|/2`` on the
+        contact set), ``coarse_start`` (a cold solve on a grid of at least 64 points per side
+        starts from the solution on the grid coarsened by two, at most two levels deep, to KKT
+        ``1e-2``, prolonged bilinearly) and ``chord_steps`` (displacement control: while an
+        iteration truncates or adds more than 0.5 % of the contact set, the next one is a
+        chord step with one FFT product of the whole change and an exact line search).
+        ``ProblemTooLargeError`` (a ``MemoryError``) up front when the solve would need more
+        than the problem's ``memory_limit``. The GIL is released; Ctrl-C raises
+        ``KeyboardInterrupt`` within a fraction of a second."""
 
 # ---- clusters ----
 def label_clusters(

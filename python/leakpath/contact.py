@@ -506,27 +506,27 @@ class ContactProblem:
             threads=threads,
             **self._start(warm_start),
         )
-        state = self._state(out, out["solver"])
+        state = self._state(out)
         self._last = state
         return state
 
-    def _state(self, out: dict[str, Any], solver: str) -> ContactState:
+    def _state(self, out: _core.ContactSolution) -> ContactState:
         return ContactState(
-            approach=float(out["approach"]),
-            pressure=out["pressure"],
-            displacement=out["displacement"],
-            gap=out["gap"],
+            approach=out.approach,
+            pressure=out.pressure,
+            displacement=out.displacement,
+            gap=out.gap,
             heights=self._h,
             dx=self.surface.dx,
             e_star=self.e_star,
             boundary=self.boundary,
-            solver=solver,
-            iterations=int(out["iterations"]),
-            kkt=float(out["kkt"]),
-            seconds=float(out["seconds"]),
-            fft_products=int(out.get("applies", 0)),
-            preconditioner_products=int(out.get("preconditioner_applies", 0)),
-            coarse_fft_products=float(out.get("coarse_applies_fine_equivalent", 0.0)),
+            solver=out.solver,
+            iterations=out.iterations,
+            kkt=out.kkt,
+            seconds=out.seconds,
+            fft_products=out.fft_products,
+            preconditioner_products=out.preconditioner_products,
+            coarse_fft_products=out.coarse.fft_products_fine_equivalent,
         )
 
 

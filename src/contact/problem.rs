@@ -174,13 +174,13 @@ pub struct CoarseCost {
     /// Polonsky–Keer iterations on the coarse levels.
     pub iterations: usize,
     /// Operator applications on the coarse levels (raw count, each on its own grid).
-    pub applies: usize,
+    pub fft_products: usize,
     /// Preconditioner applications on the coarse levels (raw count).
-    pub preconditioner_applies: usize,
-    /// `Σ applies · N_level / N_fine`: the coarse products in units of one fine product.
-    pub applies_fine_equivalent: f64,
+    pub preconditioner_products: usize,
+    /// `Σ fft_products · N_level / N_fine`: the coarse products in units of one fine product.
+    pub fft_products_fine_equivalent: f64,
     /// The same for the preconditioner applications.
-    pub preconditioner_fine_equivalent: f64,
+    pub preconditioner_products_fine_equivalent: f64,
 }
 
 /// A converged contact state, whichever solver produced it.
@@ -201,10 +201,10 @@ pub struct Solution {
     /// FFT operator applications in total: one per iteration, plus fresh products `C p` (start,
     /// large set changes, convergence checks) and one for the influence table when no kernel
     /// table was at hand; 0 for the exact solvers.
-    pub applies: usize,
+    pub fft_products: usize,
     /// Preconditioner applications (FFT pairs on the unpadded `ny × nx` grid), one per
     /// preconditioned iteration; 0 for the exact solvers.
-    pub preconditioner_applies: usize,
+    pub preconditioner_products: usize,
     /// Iterations that were chord steps (included in `iterations`; each one product `C d`).
     pub chord_steps: usize,
     /// KKT certificate relative to `h_s` (see the module documentation).
@@ -216,6 +216,6 @@ pub struct Solution {
     /// Mean pressure `p̄ = Σ p / N`.
     pub mean_pressure: f64,
     /// What the coarse levels of a coarse start cost (zero without one); not included in
-    /// `iterations`, `applies`, `preconditioner_applies`.
+    /// `iterations`, `fft_products`, `preconditioner_products`.
     pub coarse: CoarseCost,
 }

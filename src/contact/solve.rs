@@ -432,8 +432,8 @@ mod tests {
                 assert_eq!(got.kkt.to_bits(), want.kkt.to_bits());
                 assert_eq!(got.approach.to_bits(), want.approach.to_bits());
                 assert_eq!(
-                    (got.iterations, got.applies, got.contact_points),
-                    (want.iterations, want.applies, want.contact_points)
+                    (got.iterations, got.fft_products, got.contact_points),
+                    (want.iterations, want.fft_products, want.contact_points)
                 );
             }
             for (solver, block) in [(Solver::ActiveSet, true), (Solver::LawsonHanson, false)] {

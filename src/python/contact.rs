@@ -6,12 +6,13 @@ use numpy::{
     PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods,
 };
 use pyo3::prelude::*;
-use pyo3::types::PyDict;
 
 use super::pools::{check_threads, pool_for, run_solve};
 use super::{check_positive, to_py};
 use crate::alloc;
-use crate::contact::{CoarseCost, ContactProblem as Problem, Control, Options, Solver, Start};
+use crate::contact::{
+    CoarseCost, ContactProblem as Problem, Control, Options, Solution, Solver, Start,
+};
 use crate::error::Error;
 use crate::grid::Boundary;
 
@@ -24,17 +25,109 @@ fn field<'py>(
     PyArray1::from_vec(py, v).reshape([ny, nx])
 }
 
-/// The coarse-to-fine start's cost as `coarse_*` entries of a result dict.
-pub(super) fn set_coarse(d: &Bound<'_, PyDict>, c: &CoarseCost) -> PyResult<()> {
-    d.set_item("coarse_levels", c.levels)?;
-    d.set_item("coarse_iterations", c.iterations)?;
-    d.set_item("coarse_applies", c.applies)?;
-    d.set_item("coarse_preconditioner_applies", c.preconditioner_applies)?;
-    d.set_item("coarse_applies_fine_equivalent", c.applies_fine_equivalent)?;
-    d.set_item(
-        "coarse_preconditioner_fine_equivalent",
-        c.preconditioner_fine_equivalent,
-    )
+/// What the coarse levels of a cold Polonsky–Keer start cost (core: `contact::CoarseCost`).
+#[pyclass(frozen, name = "CoarseCost", module = "leakpath._core")]
+pub(super) struct PyCoarseCost {
+    #[pyo3(get)]
+    levels: usize,
+    #[pyo3(get)]
+    iterations: usize,
+    #[pyo3(get)]
+    fft_products: usize,
+    #[pyo3(get)]
+    preconditioner_products: usize,
+    #[pyo3(get)]
+    fft_products_fine_equivalent: f64,
+    #[pyo3(get)]
+    preconditioner_products_fine_equivalent: f64,
+}
+
+impl From<CoarseCost> for PyCoarseCost {
+    fn from(c: CoarseCost) -> Self {
+        PyCoarseCost {
+            levels: c.levels,
+            iterations: c.iterations,
+            fft_products: c.fft_products,
+            preconditioner_products: c.preconditioner_products,
+            fft_products_fine_equivalent: c.fft_products_fine_equivalent,
+            preconditioner_products_fine_equivalent: c.preconditioner_products_fine_equivalent,
+        }
+    }
+}
+
+/// A solved contact state as the core returns it (core: `contact::Solution`), its fields
+/// under the core's names; the grids are `(ny, nx)` numpy arrays.
+#[pyclass(frozen, name = "ContactSolution", module = "leakpath._core")]
+pub(super) struct PySolution {
+    #[pyo3(get)]
+    solver: &'static str,
+    #[pyo3(get)]
+    pressure: Py<PyArray2<f64>>,
+    #[pyo3(get)]
+    displacement: Py<PyArray2<f64>>,
+    #[pyo3(get)]
+    gap: Py<PyArray2<f64>>,
+    #[pyo3(get)]
+    approach: f64,
+    #[pyo3(get)]
+    iterations: usize,
+    #[pyo3(get)]
+    fft_products: usize,
+    #[pyo3(get)]
+    preconditioner_products: usize,
+    #[pyo3(get)]
+    chord_steps: usize,
+    #[pyo3(get)]
+    kkt: f64,
+    #[pyo3(get)]
+    contact_points: usize,
+    #[pyo3(get)]
+    load: f64,
+    #[pyo3(get)]
+    mean_pressure: f64,
+    #[pyo3(get)]
+    coarse: Py<PyCoarseCost>,
+    /// Wall time of the solve [s].
+    #[pyo3(get)]
+    seconds: f64,
+}
+
+impl PySolution {
+    fn new(py: Python<'_>, s: Solution, ny: usize, nx: usize, seconds: f64) -> PyResult<Self> {
+        Ok(PySolution {
+            solver: s.solver.name(),
+            pressure: field(py, s.pressure, ny, nx)?.unbind(),
+            displacement: field(py, s.displacement, ny, nx)?.unbind(),
+            gap: field(py, s.gap, ny, nx)?.unbind(),
+            approach: s.approach,
+            iterations: s.iterations,
+            fft_products: s.fft_products,
+            preconditioner_products: s.preconditioner_products,
+            chord_steps: s.chord_steps,
+            kkt: s.kkt,
+            contact_points: s.contact_points,
+            load: s.load,
+            mean_pressure: s.mean_pressure,
+            coarse: Py::new(py, PyCoarseCost::from(s.coarse))?,
+            seconds,
+        })
+    }
+}
+
+#[pymethods]
+impl PySolution {
+    fn __repr__(&self) -> String {
+        format!(
+            "ContactSolution(solver={:?}, approach={:.6e}, contact_points={}, iterations={}, \
+             kkt={:.1e}, seconds={:.3})",
+            self.solver,
+            self.approach,
+            self.contact_points,
+            self.iterations,
+            self.kkt,
+            self.seconds
+        )
+    }
 }
 
 pub(super) fn boundary_from(name: &str) -> PyResult<Boundary> {
@@ -163,34 +256,20 @@ impl ContactProblem {
         PyArray1::from_vec(py, b).reshape([k, k])
     }
 
-    /// The solver that `solver` runs on this grid under the given control (the `auto`
-    /// policy).
-    #[pyo3(signature = (solver="auto", load_control=false))]
-    fn resolve_solver(&self, solver: &str, load_control: bool) -> PyResult<&'static str> {
-        let control = if load_control {
-            Control::MeanPressure(1.0)
-        } else {
-            Control::Approach(0.0)
-        };
-        let n = self.inner.ny() * self.inner.nx();
-        Ok(Solver::from_name(solver)
-            .and_then(|s| s.resolve(n, control))
-            .map_err(to_py)?
-            .name())
-    }
-
     /// Solve at `approach` or at `mean_pressure` (exactly one) with `solver` ("auto",
     /// "polonsky-keer", "active-set", "lawson-hanson"). `start`: "cold" (p = 0), "previous"
     /// (this problem's last solve), "pressure" with `initial_pressure` or "set" with
-    /// `contact_set` (flat indices).
+    /// `contact_set` (flat indices). `precondition`, `coarse_start`, `chord_steps` tune
+    /// Polonsky–Keer (see `contact::Options`); the answer is the same minimiser.
     #[pyo3(signature = (
         approach=None, mean_pressure=None, solver="auto", start="cold",
-        initial_pressure=None, contact_set=None, tol=1e-12, max_iter=None, threads=None
+        initial_pressure=None, contact_set=None, tol=1e-12, max_iter=None, threads=None,
+        precondition=true, coarse_start=true, chord_steps=true
     ))]
     #[allow(clippy::too_many_arguments)]
-    fn solve<'py>(
+    fn solve(
         &mut self,
-        py: Python<'py>,
+        py: Python<'_>,
         approach: Option<f64>,
         mean_pressure: Option<f64>,
         solver: &str,
@@ -200,7 +279,10 @@ impl ContactProblem {
         tol: f64,
         max_iter: Option<usize>,
         threads: Option<i64>,
-    ) -> PyResult<Bound<'py, PyDict>> {
+        precondition: bool,
+        coarse_start: bool,
+        chord_steps: bool,
+    ) -> PyResult<PySolution> {
         let pool = pool_for(check_threads(threads)?)?;
         let control = match (approach, mean_pressure) {
             (Some(d), None) => Control::Approach(d),
@@ -287,6 +369,9 @@ impl ContactProblem {
                 tol,
                 max_iter,
                 should_stop: Some(&should_stop),
+                precondition,
+                coarse_start,
+                chord_steps,
                 ..Options::default()
             };
             let result = run_solve(&pool, n, || work.solve(control, solver, start, &opts));
@@ -295,201 +380,6 @@ impl ContactProblem {
         self.inner.attach(work);
         let sol = result.map_err(to_py)?;
         let seconds = t0.elapsed().as_secs_f64();
-        let d = PyDict::new(py);
-        d.set_item("solver", sol.solver.name())?;
-        d.set_item("pressure", field(py, sol.pressure, ny, nx)?)?;
-        d.set_item("displacement", field(py, sol.displacement, ny, nx)?)?;
-        d.set_item("gap", field(py, sol.gap, ny, nx)?)?;
-        d.set_item("approach", sol.approach)?;
-        d.set_item("iterations", sol.iterations)?;
-        d.set_item("applies", sol.applies)?;
-        d.set_item("preconditioner_applies", sol.preconditioner_applies)?;
-        set_coarse(&d, &sol.coarse)?;
-        d.set_item("kkt", sol.kkt)?;
-        d.set_item("contact_points", sol.contact_points)?;
-        d.set_item("seconds", seconds)?;
-        Ok(d)
-    }
-}
-
-/// Polonsky–Keer constrained conjugate gradients on the FFT operator (core: contact/polonsky_keer/); a stand-alone call on heights.
-pub(crate) mod pk_py {
-    use std::time::Instant;
-
-    use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray2, PyUntypedArrayMethods};
-    use pyo3::prelude::*;
-    use pyo3::types::PyDict;
-
-    use crate::alloc;
-    use crate::contact::polonsky_keer as pk;
-    use crate::contact::{Control, Options, Problem};
-    use crate::elastic::memory;
-    use crate::error::Error;
-    use crate::grid::Boundary;
-    use crate::python::{row_major, to_py};
-
-    fn invalid(name: &'static str, msg: String) -> PyErr {
-        to_py(Error::invalid(name, msg))
-    }
-
-    /// Frictionless normal contact of an elastic rough surface against a rigid flat by
-    /// Polonsky–Keer conjugate gradients. Exactly one of `approach` / `mean_pressure`.
-    /// Returns a dict: pressure, displacement, gap (2-D), approach, iterations, applies, kkt,
-    /// load, mean_pressure, contact_points, seconds.
-    #[pyfunction]
-    #[pyo3(signature = (
-        heights, dx, e_star, boundary="free", approach=None, mean_pressure=None, tol=None,
-        max_iter=None, initial_pressure=None, memory_limit=None, precondition=true,
-        operator_of=None, coarse_start=true, chord_steps=true
-    ))]
-    #[allow(clippy::too_many_arguments)]
-    pub(crate) fn solve_polonsky_keer<'py>(
-        py: Python<'py>,
-        heights: PyReadonlyArray2<'py, f64>,
-        dx: f64,
-        e_star: f64,
-        boundary: &str,
-        approach: Option<f64>,
-        mean_pressure: Option<f64>,
-        tol: Option<f64>,
-        max_iter: Option<usize>,
-        initial_pressure: Option<PyReadonlyArray2<'py, f64>>,
-        memory_limit: Option<u64>,
-        precondition: bool,
-        operator_of: Option<PyRef<'py, super::ContactProblem>>,
-        coarse_start: bool,
-        chord_steps: bool,
-    ) -> PyResult<Bound<'py, PyDict>> {
-        let op = operator_of.as_ref().map(|cp| {
-            (
-                std::sync::Arc::clone(cp.inner.operator()),
-                std::sync::Arc::clone(cp.inner.shared_kernel()),
-            )
-        });
-        let [ny, nx] = [heights.shape()[0], heights.shape()[1]];
-        let control = match (approach, mean_pressure) {
-            (Some(d), None) => Control::Approach(d),
-            (None, Some(m)) => Control::MeanPressure(m),
-            _ => {
-                return Err(invalid(
-                    "approach",
-                    "give exactly one of approach= (displacement control) and mean_pressure= \
-                     (load control)"
-                        .into(),
-                ))
-            }
-        };
-        let boundary = match boundary {
-            "free" => Boundary::Free,
-            "periodic" => Boundary::Periodic,
-            other => {
-                return Err(invalid(
-                    "boundary",
-                    format!("must be 'free' or 'periodic', got {other:?}"),
-                ))
-            }
-        };
-        if let Some(p0) = &initial_pressure {
-            let s = p0.shape();
-            if s != [ny, nx] {
-                return Err(invalid(
-                    "initial_pressure",
-                    format!(
-                        "must have the shape of the heights ({ny}, {nx}), got ({}, {})",
-                        s[0], s[1]
-                    ),
-                ));
-            }
-        }
-        let tol = tol.unwrap_or(pk::DEFAULT_TOL);
-        let memory_limit = match memory_limit {
-            Some(l) => l,
-            None => crate::python::default_memory_limit(py)?,
-        };
-        // Refuse before copying anything (the estimate includes the copy of the heights).
-        let need = memory::polonsky_keer(ny, nx, boundary);
-        if need > memory_limit {
-            let kind = match boundary {
-                Boundary::Free => "free",
-                Boundary::Periodic => "periodic",
-            };
-            return Err(to_py(Error::TooLarge {
-                bytes: need,
-                limit: memory_limit,
-                what: format!("Polonsky–Keer on a {ny} × {nx} {kind} grid"),
-            }));
-        }
-        // The solve owns its inputs, so that Ctrl-C can return while the operator of a large
-        // grid is still being built (see `interruptible_owned`).
-        let owned = |a: &PyReadonlyArray2<'_, f64>, what: &str| -> PyResult<Vec<f64>> {
-            let src = row_major(a);
-            let mut v = alloc::try_with_capacity(src.len(), what).map_err(to_py)?;
-            v.extend_from_slice(&src);
-            Ok(v)
-        };
-        let h = owned(&heights, "a copy of the heights")?;
-        let p0 = match &initial_pressure {
-            Some(a) => Some(owned(a, "a copy of the initial pressure")?),
-            None => None,
-        };
-        let start = Instant::now();
-        let outcome = crate::python::interruptible_owned(py, move |stop| {
-            let problem = Problem {
-                heights: &h,
-                ny,
-                nx,
-                dx,
-                e_star,
-                boundary,
-            };
-            // Ctrl-C: the solver polls this flag between iterations (see `interruptible`).
-            let should_stop = crate::python::stop_flag(stop);
-            let opts = Options {
-                tol,
-                max_iter,
-                memory_limit: Some(memory_limit),
-                should_stop: Some(&should_stop),
-                precondition,
-                coarse_start,
-                chord_steps,
-            };
-            crate::python::on_solver_pool(ny * nx, || match &op {
-                // The operator of a kept ContactProblem: no kernel or FFT set-up per solve.
-                // Its kernel table is the influence table of the sparse corrections.
-                Some((op, kernel)) => pk::solve_with_kernel(
-                    op,
-                    Some(&kernel.table),
-                    &problem,
-                    control,
-                    &opts,
-                    p0.as_deref(),
-                ),
-                None => pk::solve(&problem, control, &opts, p0.as_deref()),
-            })
-        })?;
-        let seconds = start.elapsed().as_secs_f64();
-        let sol = outcome.map_err(to_py)?;
-        let d = PyDict::new(py);
-        d.set_item(
-            "pressure",
-            PyArray1::from_vec(py, sol.pressure).reshape([ny, nx])?,
-        )?;
-        d.set_item(
-            "displacement",
-            PyArray1::from_vec(py, sol.displacement).reshape([ny, nx])?,
-        )?;
-        d.set_item("gap", PyArray1::from_vec(py, sol.gap).reshape([ny, nx])?)?;
-        d.set_item("approach", sol.approach)?;
-        d.set_item("iterations", sol.iterations)?;
-        d.set_item("applies", sol.applies)?;
-        d.set_item("preconditioner_applies", sol.preconditioner_applies)?;
-        d.set_item("chord_steps", sol.chord_steps)?;
-        super::set_coarse(&d, &sol.coarse)?;
-        d.set_item("kkt", sol.kkt)?;
-        d.set_item("load", sol.load)?;
-        d.set_item("mean_pressure", sol.mean_pressure)?;
-        d.set_item("contact_points", sol.contact_points)?;
-        d.set_item("seconds", seconds)?;
-        Ok(d)
+        PySolution::new(py, sol, ny, nx, seconds)
     }
 }

@@ -238,13 +238,14 @@ fn core_module(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add_function(wrap_pyfunction!(kernel_table, m)?)?;
     m.add_class::<contact::ContactProblem>()?;
+    m.add_class::<contact::PySolution>()?;
+    m.add_class::<contact::PyCoarseCost>()?;
     m.add(
         "AUTO_ACTIVE_SET_MAX_POINTS",
         crate::contact::AUTO_ACTIVE_SET_MAX_POINTS,
     )?;
     m.add_function(wrap_pyfunction!(clusters::label_clusters, m)?)?;
     m.add_function(wrap_pyfunction!(clusters::classify_clusters, m)?)?;
-    m.add_function(wrap_pyfunction!(contact::pk_py::solve_polonsky_keer, m)?)?;
     m.add_function(wrap_pyfunction!(flow::solve_reynolds_flow, m)?)?;
     m.add_function(wrap_pyfunction!(solver_threads, m)?)?;
     m.add_function(wrap_pyfunction!(dense_scratch_bytes, m)?)?;

@@ -16,33 +16,23 @@ from ._common import (
 def _cmd_flow(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from .. import _core, _validate
+    from .. import _validate
     from .._flow import flow
     from ..contact import contact_modulus, default_memory_limit, solve
 
     surface = _surface_from_arg(args.surface, args.dx)
     e_star = contact_modulus(args.E, args.nu)
-    if args.approach is not None:
-        state = solve(
-            surface, args.approach, E=args.E, nu=args.nu, boundary=args.boundary,
-            solver="polonsky-keer",
-        )
-        gap, contact = np.maximum(state.gap, 0.0), state.contact
-        approach, mean_pressure = state.approach, state.mean_pressure
-    else:
+    if args.approach is None:
         if not (math.isfinite(args.pressure) and args.pressure > 0):
             raise UsageError(f"--pressure must be a positive number, got {args.pressure!r}")
         _validate.load_scales(args.pressure, e_star, surface.dx, name="--pressure")
-        out = _core.solve_polonsky_keer(
-            np.ascontiguousarray(surface.heights, dtype=np.float64),
-            surface.dx,
-            e_star,
-            args.boundary,
-            mean_pressure=args.pressure,
-            memory_limit=default_memory_limit(),
-        )
-        gap, contact = np.maximum(out["gap"], 0.0), out["pressure"] > 0
-        approach, mean_pressure = float(out["approach"]), float(out["mean_pressure"])
+    state = solve(
+        surface, args.approach, mean_pressure=args.pressure if args.approach is None else None,
+        E=args.E, nu=args.nu, boundary=args.boundary, solver="polonsky-keer",
+        memory_limit=default_memory_limit(),
+    )
+    gap, contact = np.maximum(state.gap, 0.0), state.contact
+    approach, mean_pressure = state.approach, state.mean_pressure
     gas = {}
     if args.gas:
         gas = {

@@ -141,11 +141,12 @@ pub fn start(
     let cost = CoarseCost {
         levels: below.levels + 1,
         iterations: below.iterations + sol.iterations,
-        applies: below.applies + sol.applies,
-        preconditioner_applies: below.preconditioner_applies + sol.preconditioner_applies,
-        applies_fine_equivalent: ratio * (sol.applies as f64 + below.applies_fine_equivalent),
-        preconditioner_fine_equivalent: ratio
-            * (sol.preconditioner_applies as f64 + below.preconditioner_fine_equivalent),
+        fft_products: below.fft_products + sol.fft_products,
+        preconditioner_products: below.preconditioner_products + sol.preconditioner_products,
+        fft_products_fine_equivalent: ratio
+            * (sol.fft_products as f64 + below.fft_products_fine_equivalent),
+        preconditioner_products_fine_equivalent: ratio
+            * (sol.preconditioner_products as f64 + below.preconditioner_products_fine_equivalent),
     };
     let p = prolong(&sol.pressure, cy, cx, ny, nx)?;
     Ok(Some((p, cost)))

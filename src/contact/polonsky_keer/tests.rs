@@ -226,7 +226,10 @@ fn chord_steps_reach_the_exact_minimiser() {
                 assert!(max_rel(&l.pressure, &exact) < 1e-8);
                 let lr =
                     solve(&pr, Control::MeanPressure(s.mean_pressure), &regular, None).unwrap();
-                assert_eq!((l.iterations, l.applies), (lr.iterations, lr.applies));
+                assert_eq!(
+                    (l.iterations, l.fft_products),
+                    (lr.iterations, lr.fft_products)
+                );
                 assert_eq!(l.pressure, lr.pressure);
             }
         }
@@ -256,8 +259,8 @@ fn preconditioned_and_plain_reach_the_same_minimiser() {
             };
             let a = solve(&pr, Control::Approach(delta), &opts(1e-12), None).unwrap();
             let b = solve(&pr, Control::Approach(delta), &plain, None).unwrap();
-            used += a.preconditioner_applies;
-            assert_eq!(b.preconditioner_applies, 0);
+            used += a.preconditioner_products;
+            assert_eq!(b.preconditioner_products, 0);
             let ca: Vec<bool> = a.pressure.iter().map(|&p| p > 0.0).collect();
             let cb: Vec<bool> = b.pressure.iter().map(|&p| p > 0.0).collect();
             assert_eq!(ca, cb, "{boundary:?} Δ*={frac}");
@@ -302,8 +305,8 @@ fn coarse_start_and_cold_start_reach_the_same_minimiser() {
                 (1..=2).contains(&levels),
                 "{boundary:?} {control:?}: {levels}"
             );
-            assert!(a.coarse.applies > 0);
-            let ratio = a.coarse.applies_fine_equivalent / a.coarse.applies as f64;
+            assert!(a.coarse.fft_products > 0);
+            let ratio = a.coarse.fft_products_fine_equivalent / a.coarse.fft_products as f64;
             assert!(ratio > 0.0 && ratio < 0.26, "{ratio}");
             let ca: Vec<bool> = a.pressure.iter().map(|&p| p > 0.0).collect();
             let cb: Vec<bool> = b.pressure.iter().map(|&p| p > 0.0).collect();
@@ -793,13 +796,18 @@ fn caller_kernel_table_and_incremental_finish() {
             assert!(max_rel(&a.pressure, &b.pressure) < 1e-8);
             assert!(b.kkt <= 1e-12);
             // The given table spares the product that builds it (when the sparse path ran).
-            assert!(b.applies <= a.applies, "{} vs {}", b.applies, a.applies);
+            assert!(
+                b.fft_products <= a.fft_products,
+                "{} vs {}",
+                b.fft_products,
+                a.fft_products
+            );
             // An incremental finish stops on the updated state: the same contact set at a
             // looser tolerance, no confirming product, no displacement unless fresh.
             let loose = opts(1e-6);
             let c = solve_level(&pr, control, &loose, None, Finish::Confirmed, 0).unwrap();
             let d = solve_level(&pr, control, &loose, None, Finish::Incremental, 0).unwrap();
-            assert!(d.applies <= c.applies);
+            assert!(d.fft_products <= c.fft_products);
             assert_eq!(c.iterations, d.iterations);
             assert_eq!(c.pressure, d.pressure);
             assert!(d.displacement.is_empty() || d.displacement == c.displacement);
