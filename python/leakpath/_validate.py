@@ -260,6 +260,19 @@ def axis(value: Any, name: str = "axis") -> int | str:
     )
 
 
+def flow_axis(value: Any, name: str = "axis") -> int:
+    """The axis a leak flows along: 0 or 1 (the percolation axes ``"either"``/``"both"`` are
+    refused: a flow has one direction). The one check behind :func:`leakpath.flow`, a
+    sweep's ``flow_axis`` and the ensembles; the value crosses into the core as is."""
+    v = _scalar(value)
+    if _is_int(v) and int(v) in (0, 1):
+        return int(v)
+    raise InvalidArgumentError(
+        f"{name}: must be 0 or 1 (the leak flows along one axis), got {describe(value)}",
+        argument=name,
+    )
+
+
 def connectivity(value: Any, name: str = "connectivity") -> int:
     """4 (edge neighbours) or 8 (edges and corners)."""
     v = _scalar(value)

@@ -188,6 +188,20 @@ pub struct ContactMask<'a>(pub &'a [bool]);
 /// Free where the gap is positive (NaN is not positive; callers reject NaN gaps).
 pub struct PositiveGap<'a>(pub &'a [f64]);
 
+/// The one definition of an *open* cell, shared by the percolation classes and the flow: not
+/// in contact and a positive gap (NaN is not positive). A free cell whose gap a solve left at
+/// or below 0 conducts nothing, so it is closed.
+#[inline(always)]
+pub fn is_open(gap: f64, contact: bool) -> bool {
+    !contact && gap > 0.0
+}
+
+/// The open cells ([`is_open`]) of a gap field and an optional contact mask (same length).
+pub struct OpenCells<'a> {
+    pub gap: &'a [f64],
+    pub contact: Option<&'a [bool]>,
+}
+
 #[inline(always)]
 fn low_mask(len: usize) -> u64 {
     if len >= 64 {
@@ -247,6 +261,30 @@ impl FreeCells for PositiveGap<'_> {
         let mut bits = 0u64;
         for (k, &g) in self.0[start..start + len].iter().enumerate() {
             bits |= ((g > 0.0) as u64) << k;
+        }
+        bits
+    }
+}
+
+impl FreeCells for OpenCells<'_> {
+    fn len(&self) -> usize {
+        self.gap.len()
+    }
+    #[inline(always)]
+    fn pack(&self, start: usize, len: usize) -> u64 {
+        let gaps = &self.gap[start..start + len];
+        let mut bits = 0u64;
+        match self.contact {
+            Some(c) => {
+                for (k, (&g, &c)) in gaps.iter().zip(&c[start..start + len]).enumerate() {
+                    bits |= (is_open(g, c) as u64) << k;
+                }
+            }
+            None => {
+                for (k, &g) in gaps.iter().enumerate() {
+                    bits |= (is_open(g, false) as u64) << k;
+                }
+            }
         }
         bits
     }
