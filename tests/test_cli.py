@@ -77,7 +77,7 @@ class TestSurfaceRmd:
         data = json.loads(proc.stdout)
         h = load(out).heights
         assert data["shape"] == [17, 17]
-        assert data["dx"] == pytest.approx(1 / 16)
+        assert data["dx"] == pytest.approx(500 / 16)  # default side 500 µm
         assert data["m0"] == pytest.approx(np.var(h), rel=1e-12)
         assert data["height_range"] == pytest.approx(np.ptp(h), rel=1e-12)
         assert data["alpha"] == pytest.approx(data["m0"] * data["m4"] / data["m2"] ** 2)
@@ -105,7 +105,7 @@ class TestSurfaceSpectral:
         )
         assert proc.returncode == 0, proc.stderr
         s = load(out)
-        assert s.shape == (32, 48) and s.dx == pytest.approx(1 / 48)
+        assert s.shape == (32, 48) and s.dx == pytest.approx(500 / 48)  # default 500 µm
         h = s.heights
         slope = math.sqrt(np.mean(np.diff(h, axis=1) ** 2) + np.mean(np.diff(h, axis=0) ** 2))
         assert slope / s.dx == pytest.approx(0.25, rel=1e-12)

@@ -31,7 +31,6 @@ hydraulic aperture ``(12 K)^{1/3}`` (``g`` for plates).
 from __future__ import annotations
 
 import math
-import numbers
 from dataclasses import dataclass, field
 from typing import Any
 

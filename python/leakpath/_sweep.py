@@ -141,32 +141,16 @@ def _resolve_approaches(problem: ContactProblem, levels: int, approaches: Any) -
     limit = problem.max_approach
     if approaches is None:
         return [float(limit * k / levels) for k in range(levels + 1)]
-    arr = _validate.real_array("approaches", approaches, ndim=1, finite=False)
-    if arr.size == 0:
-        raise InvalidArgumentError("approaches: must be a non-empty 1-D sequence of numbers")
-    if not np.all(np.isfinite(arr)):
-        raise InvalidArgumentError("approaches: every value must be finite")
-    if np.any(arr < 0):
-        raise InvalidArgumentError(f"approaches: must be ≥ 0, got min {arr.min()!r}")
-    if np.any(np.diff(arr) <= 0):
-        raise InvalidArgumentError("approaches: must be strictly increasing")
-    if problem.boundary == "periodic" and arr[-1] > limit * (1 + 1e-12):
-        raise InvalidArgumentError(
-            f"approaches: {arr[-1]!r} exceeds full contact of a periodic surface, "
-            f"max h − mean h = {limit!r}; give approaches ≤ that"
-        )
-    return [float(a) for a in arr]
+    full = limit if problem.boundary == "periodic" else None
+    return _validate.increasing(
+        "approaches",
+        approaches,
+        lambda v, name: _validate.approach(v, full_contact=full, name=name),
+    )
 
 
 def _resolve_mean_pressures(mean_pressures: Any) -> list[float]:
-    arr = _validate.real_array("mean_pressures", mean_pressures, ndim=1, finite=False)
-    if arr.size == 0:
-        raise InvalidArgumentError("mean_pressures: must be a non-empty 1-D sequence of numbers")
-    if not (np.all(np.isfinite(arr)) and np.all(arr > 0)):
-        raise InvalidArgumentError("mean_pressures: every value must be finite and > 0")
-    if np.any(np.diff(arr) <= 0):
-        raise InvalidArgumentError("mean_pressures: must be strictly increasing")
-    return [float(v) for v in arr]
+    return _validate.increasing("mean_pressures", mean_pressures, _validate.mean_pressure)
 
 
 def _check_axis(axis: Any) -> Any:

@@ -786,6 +786,41 @@ mod tests {
     }
 
     #[test]
+    fn open_cells_are_free_cells_with_a_positive_gap() {
+        let (ny, nx) = (37, 131);
+        let contact = random_mask(ny, nx, 0.3, 5);
+        let mut rng = Rng(77);
+        // Positive, zero, negative and NaN gaps.
+        let gap: Vec<f64> = (0..ny * nx)
+            .map(|k| match k % 7 {
+                0 => 0.0,
+                1 => -1e-12,
+                2 => f64::NAN,
+                _ => rng.unit() + 1e-300,
+            })
+            .collect();
+        for contact in [Some(&contact[..]), None] {
+            let open = OpenCells { gap: &gap, contact };
+            let want: Vec<bool> = (0..ny * nx)
+                .map(|k| is_open(gap[k], contact.is_some_and(|c| c[k])))
+                .collect();
+            assert!(want.iter().any(|&o| o) && want.iter().any(|&o| !o));
+            for start in (0..ny * nx).step_by(64) {
+                let len = (ny * nx - start).min(64);
+                let bits = open.pack(start, len);
+                for k in 0..len {
+                    assert_eq!(bits >> k & 1 == 1, want[start + k], "cell {}", start + k);
+                }
+            }
+            let per = Periodic::default();
+            let mut a = vec![0u32; ny * nx];
+            let na = label_into(&open, ny, nx, Connectivity::Four, per, &mut a).unwrap();
+            let (b, nb) = label(&want, ny, nx, Connectivity::Four, per).unwrap();
+            assert_eq!((a, na), (b, nb));
+        }
+    }
+
+    #[test]
     fn clusters_pack_bools_matches_bytewise() {
         for seed in 0..50 {
             let m = random_mask(1, 64, 0.5, seed);
