@@ -489,13 +489,16 @@ def test_core_rejects_bad_arguments() -> None:
     with pytest.raises(ValueError, match=r"^threads\b"):
         _core.label_clusters(free, threads=0)
     lab = _core.label_open(gap, 1.0)
+    assert [c.axis for c in _core.classify(lab, [1, "both", 0, "either"])] == [
+        1, "both", 0, "either"
+    ]
     for bad in (2, "2", "0", True, 0.0, None):
         with pytest.raises(ValueError, match=r"^axis\b"):
-            _core.classify(lab, bad)
+            _core.classify(lab, [0, bad])
     with pytest.raises(ValueError, match=r"^periodic_axis0\b"):
-        _core.classify(_core.label_open(gap, 1.0, periodic_axis0=True), 0)
+        _core.classify(_core.label_open(gap, 1.0, periodic_axis0=True), [0])
     with pytest.raises(ValueError, match=r"^periodic_axis1\b"):
-        _core.classify(_core.label_open(gap, 1.0, periodic_axis1=True), "either")
+        _core.classify(_core.label_open(gap, 1.0, periodic_axis1=True), ["either"])
     with pytest.raises(ValueError, match=r"^contact\b"):
         _core.label_open(gap, 1.0, contact=np.ones((2, 3), dtype=bool))
     with pytest.raises(ValueError, match=r"^dx\b"):

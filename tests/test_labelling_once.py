@@ -14,9 +14,14 @@ from leakpath import _core, _percolation
 @pytest.fixture
 def calls(monkeypatch):
     """Counts the labellings (the private entry point) and the flow solves that label."""
-    seen = {"label": 0, "flow_labelled": 0}
+    seen = {"label": 0, "flow_labelled": 0, "classify": 0}
     label = _percolation._label_open
     solve = _core.solve_reynolds_flow
+    classify = _core.classify
+
+    def counted_classify(*args, **kwargs):
+        seen["classify"] += 1
+        return classify(*args, **kwargs)
 
     def counted_label(*args, **kwargs):
         seen["label"] += 1
@@ -29,6 +34,7 @@ def calls(monkeypatch):
 
     monkeypatch.setattr(_percolation, "_label_open", counted_label)
     monkeypatch.setattr(_core, "solve_reynolds_flow", counted_solve)
+    monkeypatch.setattr(_core, "classify", counted_classify)
     return seen
 
 
@@ -38,8 +44,10 @@ def test_a_sweep_level_labels_once(calls, axis) -> None:
     result = leakpath.sweep(surface, levels=6, axis=axis, flow=True)
     rows = len(result.rows)
     # One labelling per level, one for the reference state (Δ = 0, nothing in contact);
-    # the flow solves reuse them.
+    # one classification call per labelling covers both axes and `axis`; the flow solves
+    # reuse the labellings.
     assert calls["label"] == rows + 1
+    assert calls["classify"] == rows + 1
     assert calls["flow_labelled"] == 0
 
 

@@ -305,10 +305,13 @@ def label_open(
     Per-cluster cells, volumes and touch flags come with the labels (:class:`Labelling`).
     """
 
-def classify(labelling: Labelling, axis: Axis, threads: int | None = None) -> Classification:
-    """Percolation classes of a labelling's clusters for flow along ``axis`` (0, 1,
-    ``"either"`` or ``"both"``): per-cluster work only, no labelling. Wrap along a flow axis
-    is a ``ValueError`` (a periodic surface wraps across the flow)."""
+def classify(
+    labelling: Labelling, axes: list[Axis], threads: int | None = None
+) -> list[Classification]:
+    """Percolation classes of a labelling's clusters for flow along each of ``axes`` (0, 1,
+    ``"either"`` or ``"both"``), one :class:`Classification` per axis in order: per-cluster
+    work only, no labelling. Wrap along a flow axis is a ``ValueError`` (a periodic surface
+    wraps across the flow)."""
 
 def solve_reynolds_flow(
     gap: npt.NDArray[np.float64],

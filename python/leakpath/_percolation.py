@@ -34,6 +34,7 @@ The labelling runs in Rust on all cores (``threads`` to limit it); labels are nu
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -52,6 +53,7 @@ __all__ = [
     "Percolation",
     "label",
     "percolation",
+    "percolations",
 ]
 
 #: Class codes used by :attr:`Percolation.classes` and :meth:`Percolation.class_map`.
@@ -198,7 +200,12 @@ def state_labelling(
     cache = state.__dict__.setdefault("_labelling_cache", {})
     if key not in cache:
         gap = _validate.real_array("gap", state.gap, finite=False, copy=False)
-        contact = np.ascontiguousarray(np.asarray(state.contact, dtype=bool))
+        contact = np.asarray(state.contact)
+        if contact.dtype != np.bool_:
+            raise InvalidArgumentError(
+                f"contact: must be a boolean mask (e.g. pressure > 0), got dtype {contact.dtype}"
+            )
+        contact = np.ascontiguousarray(contact)
         cache[key] = _label_open(
             gap, _validate.spacing("dx", state.dx), contact, connectivity, key[1:], threads
         )
@@ -306,11 +313,44 @@ def _check_wrap(periodic: Any, axis: int | str) -> bool:
     return wrap
 
 
+def percolations(
+    state: Any,
+    axes: Sequence[int | str],
+    *,
+    connectivity: int = 4,
+    threads: int | None = None,
+) -> list[Percolation]:
+    """:func:`percolation` of a contact state along each of ``axes`` (the state's wrap, as
+    with ``periodic=None``), from its one labelling per wrap (:func:`state_labelling`) and
+    one classification call per labelling: what a sweep level tabulates."""
+    canon = [_validate.axis(a, "axes") for a in axes]
+    conn = _validate.connectivity(connectivity)
+    threads = _validate.threads(threads)
+    dx_f = _validate.spacing("dx", state.dx)
+    periodic = getattr(state, "boundary", None) == "periodic"
+    groups: dict[tuple[bool, bool], list[int | str]] = {}
+    for a in dict.fromkeys(canon):  # distinct axes, in order
+        groups.setdefault(_wrap_for(a, periodic), []).append(a)
+    found: dict[int | str, Percolation] = {}
+    for wrap, group in groups.items():
+        lab = state_labelling(state, connectivity=conn, wrap=wrap, threads=threads)
+        for a, res in zip(group, _core.classify(lab, group, threads=threads), strict=True):
+            found[a] = _percolation_of(lab, res, a, conn, any(wrap), dx_f)
+    return [found[a] for a in canon]
+
+
 def _classified(
     lab: Any, axis: int | str, conn: int, wrap: bool, dx: float, threads: int | None
 ) -> Percolation:
     """:class:`Percolation` of a labelling for ``axis`` (per-cluster work only)."""
-    res = _core.classify(lab, axis, threads=threads)
+    (res,) = _core.classify(lab, [axis], threads=threads)
+    return _percolation_of(lab, res, axis, conn, wrap, dx)
+
+
+def _percolation_of(
+    lab: Any, res: Any, axis: int | str, conn: int, wrap: bool, dx: float
+) -> Percolation:
+    """:class:`Percolation` from a labelling and its classification for ``axis``."""
     cell = dx * dx
     return Percolation(
         labels=lab.labels,

@@ -89,6 +89,7 @@ import numpy as np
 from . import _validate, leakage  # leakage: leak-rate columns Q, K, K_star
 from ._checkpoint import CHECKPOINT_FORMAT, CheckpointMismatch, _Checkpoint, _Level
 from ._core import __version__
+from ._percolation import percolations
 from ._table import COLUMNS, CSV_COLUMNS, SweepResult, _finish_row, surface_sha256
 from .contact import AUTO_ACTIVE_SET_MAX_POINTS, SOLVERS, ContactProblem, ContactState
 from .errors import InvalidArgumentError, NotConvergedError
@@ -257,9 +258,9 @@ def _analyse(
     """Row, class map and fields of a solved level, without the leak-rate columns
     (:class:`leakpath.leakage.LevelFlows` adds them)."""
     t_start = time.perf_counter()
-    p0 = state.percolation(axis=0, connectivity=connectivity, threads=threads)
-    p1 = state.percolation(axis=1, connectivity=connectivity, threads=threads)
-    pa = state.percolation(axis=axis, connectivity=connectivity, threads=threads)
+    # One labelling of the level's open cells, classified for both axes and `axis` in one
+    # call; the level's flow reuses the labelling (leakpath._percolation.state_labelling).
+    p0, p1, pa = percolations(state, (0, 1, axis), connectivity=connectivity, threads=threads)
     mom = nayak_moments(state.deformed, state.dx)
     n_contact = int(np.count_nonzero(state.contact))
     row: dict[str, Any] = {

@@ -308,36 +308,47 @@ impl Classification {
     }
 }
 
-/// Classifies the clusters of `labelling` for flow along `axis` (0, 1, "either" or
-/// "both"): no labelling, only per-cluster work. Wrap along a flow axis is refused.
+/// Classifies the clusters of `labelling` for flow along each of `axes` (0, 1, "either" or
+/// "both"): no labelling, only per-cluster work; one [`Classification`] per axis, in order.
+/// Wrap along a flow axis is refused.
 #[pyfunction]
-#[pyo3(signature = (labelling, axis, threads=None))]
+#[pyo3(signature = (labelling, axes, threads=None))]
 pub(super) fn classify<'py>(
     py: Python<'py>,
     labelling: PyRef<'py, Labelling>,
-    axis: Axis,
+    axes: Vec<Axis>,
     threads: Option<i64>,
-) -> PyResult<Classification> {
+) -> PyResult<Vec<Classification>> {
     let pool = pool_for(check_threads(threads)?)?;
     let cl = &labelling.clusters;
-    let class = py
-        .detach(|| run_in(&pool, || clusters::classify(cl, axis.0)))
+    let classes = py
+        .detach(|| {
+            run_in(&pool, || {
+                axes.iter()
+                    .map(|a| clusters::classify(cl, a.0))
+                    .collect::<Result<Vec<_>, Error>>()
+            })
+        })
         .map_err(to_py)?;
-    let classes = PyArray1::from_vec(py, class.classes);
-    read_only(classes.as_any())?;
-    Ok(Classification {
-        axis,
-        classes: classes.unbind(),
-        spanning_volume: class.spanning_volume,
-        dead_end_volume: class.dead_end_volume,
-        trapped_volume: class.trapped_volume,
-        free_volume: class.free_volume,
-        spanning_cells: class.spanning_area,
-        dead_end_cells: class.dead_end_area,
-        trapped_cells: class.trapped_area,
-        free_cells: class.free_area,
-        n_spanning: class.n_spanning,
-        n_dead_end: class.n_dead_end,
-        n_trapped: class.n_trapped,
-    })
+    let mut out = Vec::with_capacity(axes.len());
+    for (axis, class) in axes.into_iter().zip(classes) {
+        let codes = PyArray1::from_vec(py, class.classes);
+        read_only(codes.as_any())?;
+        out.push(Classification {
+            axis,
+            classes: codes.unbind(),
+            spanning_volume: class.spanning_volume,
+            dead_end_volume: class.dead_end_volume,
+            trapped_volume: class.trapped_volume,
+            free_volume: class.free_volume,
+            spanning_cells: class.spanning_area,
+            dead_end_cells: class.dead_end_area,
+            trapped_cells: class.trapped_area,
+            free_cells: class.free_area,
+            n_spanning: class.n_spanning,
+            n_dead_end: class.n_dead_end,
+            n_trapped: class.n_trapped,
+        });
+    }
+    Ok(out)
 }
