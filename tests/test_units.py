@@ -51,8 +51,13 @@ def test_steep_surfaces_warn_once_with_a_leakpath_warning() -> None:
         leakpath.ContactProblem(s)
     # A surface built by hand warns when it enters the contact model.
     steep = leakpath.Surface(s.heights, s.dx)
-    with pytest.warns(SlopeWarning):
+    with pytest.warns(SlopeWarning) as record:
         leakpath.ContactProblem(steep)
+    # Warnings point at the user's line, also from inside a sweep.
+    assert record[0].filename == __file__
+    with pytest.warns(SlopeWarning) as record:
+        leakpath.sweep(leakpath.Surface(s.heights, s.dx), levels=1, flow=False)
+    assert record[0].filename == __file__
 
 
 def test_the_unit_travels_with_the_surface(tmp_path) -> None:

@@ -38,6 +38,7 @@ import io
 import json
 import math
 import os
+import sys
 import warnings
 from collections.abc import Mapping
 from dataclasses import InitVar, dataclass, field
@@ -111,9 +112,26 @@ def check_slope(surface: Surface, *, stacklevel: int = 2) -> float:
             f"the heights (both in {surface.unit}), or use a coarser grid or a longer "
             "lateral size",
             SlopeWarning,
-            stacklevel=stacklevel + 1,
+            stacklevel=max(stacklevel + 1, _caller_level()),
         )
     return slope
+
+
+_PACKAGE_DIR = os.path.dirname(os.path.abspath(__file__))
+
+
+def _caller_level() -> int:
+    """``stacklevel`` of the first frame outside the leakpath package, seen from
+    :func:`warnings.warn` called in this module's caller (a warning points at user code,
+    not at the sweep or generator that raised it)."""
+    frame = sys._getframe(2)  # the caller of check_slope
+    level = 2
+    while frame is not None and os.path.abspath(frame.f_code.co_filename).startswith(
+        _PACKAGE_DIR + os.sep
+    ):
+        frame = frame.f_back
+        level += 1
+    return level
 
 FloatArray = npt.NDArray[np.float64]
 PathLike = str | os.PathLike[str]
