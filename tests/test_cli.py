@@ -67,7 +67,7 @@ class TestSurfaceRmd:
         m2 = 0.5 * (np.mean(np.diff(h, axis=1) ** 2) + np.mean(np.diff(h, axis=0) ** 2))
         m2 /= s.dx**2
         assert float(rows["m2 [1]"]) == pytest.approx(m2, rel=1e-5)
-        assert {"m4", "alpha", "shape (ny x nx)"} <= set(rows)
+        assert {"m4 [µm^-2]", "alpha [1]", "shape (ny x nx)"} <= set(rows)
         assert rows["shape (ny x nx)"] == "33 x 33"
 
     def test_json(self, tmp_path):
