@@ -162,7 +162,7 @@ def bench_size(n: int, repeats: int, threads: int | None) -> dict[str, object]:
         ours = percolation(gap, dx=dx, contact=contact, threads=threads)
         ref = scipy_classify(gap, contact, dx)
         assert ours.n_clusters == ref["n_clusters"]
-        assert ours.free_area == ref["free_area"]
+        assert ours.free_cells == ref["free_area"]  # cells
         for key in ("spanning_volume", "dead_end_volume", "trapped_volume"):
             assert np.isclose(getattr(ours, key), ref[key], rtol=1e-9), key
     return row

@@ -59,15 +59,15 @@ class TestSurfaceRmd:
 
         rows = parse_table(proc.stdout)
         h = s.heights
-        assert float(rows["m0"]) == pytest.approx(np.var(h), rel=1e-5)
-        assert float(rows["rms height"]) == pytest.approx(np.std(h), rel=1e-5)
-        assert float(rows["h_s (max - min)"]) == pytest.approx(np.ptp(h), rel=1e-5)
-        assert float(rows["mean height"]) == pytest.approx(np.mean(h), rel=1e-5)
-        assert float(rows["dx"]) == pytest.approx(2.0 / 32, rel=1e-6)
+        assert float(rows["m0 [µm^2]"]) == pytest.approx(np.var(h), rel=1e-5)
+        assert float(rows["rms height [µm]"]) == pytest.approx(np.std(h), rel=1e-5)
+        assert float(rows["h_s (max - min) [µm]"]) == pytest.approx(np.ptp(h), rel=1e-5)
+        assert float(rows["mean height [µm]"]) == pytest.approx(np.mean(h), rel=1e-5)
+        assert float(rows["dx [µm]"]) == pytest.approx(2.0 / 32, rel=1e-6)
         m2 = 0.5 * (np.mean(np.diff(h, axis=1) ** 2) + np.mean(np.diff(h, axis=0) ** 2))
         m2 /= s.dx**2
-        assert float(rows["m2"]) == pytest.approx(m2, rel=1e-5)
-        assert {"m4", "alpha", "shape (ny x nx)"} <= set(rows)
+        assert float(rows["m2 [1]"]) == pytest.approx(m2, rel=1e-5)
+        assert {"m4 [µm^-2]", "alpha [1]", "shape (ny x nx)"} <= set(rows)
         assert rows["shape (ny x nx)"] == "33 x 33"
 
     def test_json(self, tmp_path):
@@ -77,7 +77,7 @@ class TestSurfaceRmd:
         data = json.loads(proc.stdout)
         h = load(out).heights
         assert data["shape"] == [17, 17]
-        assert data["dx"] == pytest.approx(1 / 16)
+        assert data["dx"] == pytest.approx(500 / 16)  # default side 500 µm
         assert data["m0"] == pytest.approx(np.var(h), rel=1e-12)
         assert data["height_range"] == pytest.approx(np.ptp(h), rel=1e-12)
         assert data["alpha"] == pytest.approx(data["m0"] * data["m4"] / data["m2"] ** 2)
@@ -105,7 +105,7 @@ class TestSurfaceSpectral:
         )
         assert proc.returncode == 0, proc.stderr
         s = load(out)
-        assert s.shape == (32, 48) and s.dx == pytest.approx(1 / 48)
+        assert s.shape == (32, 48) and s.dx == pytest.approx(500 / 48)  # default 500 µm
         h = s.heights
         slope = math.sqrt(np.mean(np.diff(h, axis=1) ** 2) + np.mean(np.diff(h, axis=0) ** 2))
         assert slope / s.dx == pytest.approx(0.25, rel=1e-12)
@@ -117,7 +117,7 @@ class TestSurfaceSpectral:
         assert proc.returncode == 0, proc.stderr
         s = load(out)
         assert np.array_equal(s.heights, spectral(64, 0.5, seed=4).heights)
-        assert float(parse_table(proc.stdout)["rms height"]) == pytest.approx(1.0, rel=1e-5)
+        assert float(parse_table(proc.stdout)["rms height [µm]"]) == pytest.approx(1.0, rel=1e-5)
 
     def test_rms_height_and_slope_exclusive(self, tmp_path):
         proc = run(

@@ -246,7 +246,8 @@ def test_enclosed_pocket_is_trapped() -> None:
     p = percolation(g, dx=1.0, axis="either")
     assert list(p.classes) == [TRAPPED]
     assert p.trapped_volume == p.free_volume == 1.5
-    assert p.trapped_area == p.free_area == 3
+    assert p.trapped_cells == p.free_cells == 3
+    assert p.trapped_area == p.free_area == 3.0  # dx = 1: cells × dx²
     assert p.class_map().tolist() == [
         [0, 0, 0, 0, 0],
         [0, 3, 3, 0, 0],
@@ -293,13 +294,13 @@ def test_spiral_is_one_cluster(connectivity: int) -> None:
     for axis in (0, 1, "either", "both"):
         p = percolation(gap, dx=1.0, axis=axis, connectivity=connectivity)
         assert p.n_clusters == 1
-        assert int(p.areas[0]) == cells
+        assert int(p.cell_counts[0]) == cells
         # It touches one edge at one cell: it cannot span, whatever the flow direction.
         assert list(p.classes) == [DEAD_END] and not p.percolates
         assert p.dead_end_volume == pytest.approx(0.25 * cells, rel=1e-12)
     closed, cells = spiral(801, margin=3, exit_to_edge=False)
     p = percolation(np.where(closed, 1.0, 0.0), dx=1.0, connectivity=connectivity)
-    assert p.n_clusters == 1 and int(p.areas[0]) == cells
+    assert p.n_clusters == 1 and int(p.cell_counts[0]) == cells
     assert list(p.classes) == [TRAPPED]
 
 
@@ -357,13 +358,15 @@ def test_class_volumes_add_up_to_the_free_volume(axis, connectivity) -> None:
         parts = res.spanning_volume + res.dead_end_volume + res.trapped_volume
         assert abs(parts - res.free_volume) <= 1e-12 * res.free_volume
         assert res.free_volume == pytest.approx(gap[free].sum() * dx * dx, rel=1e-12)
-        assert res.free_area == int(free.sum())
+        assert res.free_cells == int(free.sum())
+        assert res.free_area == pytest.approx(int(free.sum()) * dx * dx, rel=1e-15)
         assert res.n_spanning + res.n_dead_end + res.n_trapped == res.n_clusters
         # Per cluster, against numpy.
         ref_v = np.bincount(res.labels.ravel(), weights=gap.ravel(), minlength=res.n_clusters + 1)
         ref_a = np.bincount(res.labels.ravel(), minlength=res.n_clusters + 1)
         np.testing.assert_allclose(res.volumes, ref_v[1:] * dx * dx, rtol=1e-12)
-        assert np.array_equal(res.areas, ref_a[1:])
+        assert np.array_equal(res.cell_counts, ref_a[1:])
+        np.testing.assert_allclose(res.areas, ref_a[1:] * dx * dx, rtol=1e-15)
         for code, vol in [
             (SPANNING, res.spanning_volume),
             (DEAD_END, res.dead_end_volume),
@@ -425,7 +428,7 @@ def test_real_contact_state() -> None:
     surf = generators.rmd(5, 2.1, seed=1)
     state = contact_mod.solve(surf, 0.5 * surf.height_range)
     p = percolation(state)
-    assert p.free_area == int((~state.contact).sum())
+    assert p.free_cells == int((~state.contact).sum())
     assert p.free_volume == pytest.approx(state.gap[~state.contact].sum() * state.dx**2)
 
 
@@ -485,18 +488,34 @@ def test_core_rejects_bad_arguments() -> None:
         _core.label_clusters(free, 6)
     with pytest.raises(ValueError, match=r"^threads\b"):
         _core.label_clusters(free, threads=0)
-    with pytest.raises(ValueError, match=r"^flow\b"):
-        _core.classify_clusters(gap, 1.0, flow="2")
+    lab = _core.label_open(gap, 1.0)
+    assert [c.axis for c in _core.classify(lab, [1, "both", 0, "either"])] == [
+        1, "both", 0, "either"
+    ]
+    for bad in (2, "2", "0", True, 0.0, None):
+        with pytest.raises(ValueError, match=r"^axis\b"):
+            _core.classify(lab, [0, bad])
     with pytest.raises(ValueError, match=r"^periodic_axis0\b"):
-        _core.classify_clusters(gap, 1.0, periodic_axis0=True, flow="0")
+        _core.classify(_core.label_open(gap, 1.0, periodic_axis0=True), [0])
     with pytest.raises(ValueError, match=r"^periodic_axis1\b"):
-        _core.classify_clusters(gap, 1.0, periodic_axis1=True, flow="either")
+        _core.classify(_core.label_open(gap, 1.0, periodic_axis1=True), ["either"])
     with pytest.raises(ValueError, match=r"^contact\b"):
-        _core.classify_clusters(gap, 1.0, contact=np.ones((2, 3), dtype=bool))
+        _core.label_open(gap, 1.0, contact=np.ones((2, 3), dtype=bool))
     with pytest.raises(ValueError, match=r"^dx\b"):
-        _core.classify_clusters(gap, 0.0)
+        _core.label_open(gap, 0.0)
     with pytest.raises(ValueError, match=r"^gap\b"):
-        _core.classify_clusters(np.full((3, 3), np.nan), 1.0)
+        _core.label_open(np.full((3, 3), np.nan), 1.0)
+    # The flow takes a labelling made with its own connectivity and wrap only.
+    with pytest.raises(ValueError, match=r"^labels\b"):
+        _core.solve_reynolds_flow(gap, 1.0, labels=_core.label_open(gap, 1.0, connectivity=8))
+    with pytest.raises(ValueError, match=r"^labels\b"):
+        _core.solve_reynolds_flow(gap, 1.0, labels=_core.label_open(np.ones((3, 4)), 1.0))
+    with pytest.raises(ValueError, match=r"^labels\b"):  # labels of other open cells
+        _core.solve_reynolds_flow(
+            np.where(np.eye(3, dtype=bool), 0.0, 1.0), 1.0, labels=_core.label_open(gap, 1.0)
+        )
+    with pytest.raises(ValueError, match=r"^axis\b"):
+        _core.solve_reynolds_flow(gap, 1.0, axis="either")
     # Too many cells for u32 indices: refused before anything is allocated (the inputs are
     # zero-stride views, so they cost no memory either).
     with pytest.raises(ValueError, match=r"^free\b"):

@@ -138,7 +138,7 @@ class TestEstimators:
     @pytest.mark.parametrize("seed", [0, 1, 2])
     @pytest.mark.parametrize("hurst", [0.3, 0.8])
     def test_fd_and_spectral_agree(self, seed, hurst):
-        s = spectral(256, hurst, seed=seed, short_cutoff=16 / 256)
+        s = spectral(256, hurst, seed=seed, length=500.0, short_cutoff=16 * 500.0 / 256)
         fd = nayak_moments(s)
         sp = nayak_moments(s, method="spectral")
         assert fd.m0 == pytest.approx(sp.m0, rel=1e-12)

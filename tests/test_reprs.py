@@ -128,7 +128,7 @@ def test_sweep_result_shows_the_length_unit(surface: leakpath.Surface) -> None:
     metres = leakpath.Surface(surface.heights * 1e-6, surface.dx * 1e-3, metadata={"unit": "m"})
     result = sweep(metres, levels=2, flow=False)
     text = check_short(result, "SweepResult")
-    assert "dx=3.125e-05 m," in text
+    assert f"dx={surface.dx * 1e-3:.6g} m," in text
 
 
 def test_ensemble_result(tmp_path: Path) -> None:

@@ -296,8 +296,9 @@ class TestSpectral:
         "shape, kw",
         [
             ((128, 128), {}),
-            ((64, 96), {"long_cutoff": 0.5, "short_cutoff": 0.05}),
-            ((63, 81), {"long_cutoff": 0.3, "short_cutoff": 0.1}),
+            # Cut-offs in µm on the default 500 µm box.
+            ((64, 96), {"long_cutoff": 250.0, "short_cutoff": 25.0}),
+            ((63, 81), {"long_cutoff": 150.0, "short_cutoff": 50.0}),
         ],
     )
     def test_no_energy_outside_band_and_real(self, shape, kw):

@@ -81,44 +81,110 @@ class ContactSolution:
     def seconds(self) -> float:
         """Wall time of the solve [s]."""
 
-class ClusterResult(_TypedDict):
-    """:func:`classify_clusters`."""
+#: A flow direction as it crosses into the core: the canonical values of
+#: :func:`leakpath._validate.axis` (the flow solver takes 0 or 1 only).
+Axis = _Literal[0, 1, "either", "both"]
 
-    labels: npt.NDArray[np.uint32]
-    n_clusters: int
-    areas: npt.NDArray[np.uint64]
-    volumes: _F64
-    touches: npt.NDArray[np.uint8]
-    classes: npt.NDArray[np.uint8]
-    spanning_volume: float
-    dead_end_volume: float
-    trapped_volume: float
-    free_volume: float
-    spanning_area: int
-    dead_end_area: int
-    trapped_area: int
-    free_area: int
-    n_spanning: int
-    n_dead_end: int
-    n_trapped: int
+class Labelling:
+    """:func:`label_open`: the open cells of one gap labelled once (frozen; read-only arrays).
 
-class FlowResult(_TypedDict):
-    """:func:`solve_reynolds_flow`."""
+    ``labels`` (``uint32``, as :func:`label_clusters`), ``n_clusters``; per cluster (entry
+    ``k − 1`` for label ``k``): ``areas`` (cells, ``uint64``), ``volumes`` (``Σ g·dx²``,
+    ``float64``), ``touches`` (bit flags 1 first row, 2 last row, 4 first column, 8 last
+    column, ``uint8``); and the labelling's ``connectivity``, ``periodic_axis0``,
+    ``periodic_axis1`` and ``dx``.
+    """
 
-    pressure: _F64
-    flux_axis0: _F64
-    flux_axis1: _F64
-    flow_rate: float
-    inlet_flow_rate: float
-    conductance: float
-    permeability: float
-    residual: float
-    conservation: float
-    iterations: int
-    n_unknowns: int
-    levels: int
-    solver: str
-    seconds: float
+    @property
+    def labels(self) -> npt.NDArray[np.uint32]: ...
+    @property
+    def n_clusters(self) -> int: ...
+    @property
+    def areas(self) -> npt.NDArray[np.uint64]: ...
+    @property
+    def volumes(self) -> _F64: ...
+    @property
+    def touches(self) -> npt.NDArray[np.uint8]: ...
+    @property
+    def connectivity(self) -> int: ...
+    @property
+    def periodic_axis0(self) -> bool: ...
+    @property
+    def periodic_axis1(self) -> bool: ...
+    @property
+    def dx(self) -> float: ...
+
+class Classification:
+    """:func:`classify`: classes of a labelling's clusters for one ``axis`` (frozen).
+
+    ``classes`` (1 spanning, 2 dead-end, 3 trapped, ``uint8``, read-only); totals
+    ``spanning_volume``, ``dead_end_volume``, ``trapped_volume``, ``free_volume``
+    (compensated sums over clusters, so the three classes add up to ``free_volume`` to a few
+    ulps), cell counts ``spanning_cells``, ``dead_end_cells``, ``trapped_cells``,
+    ``free_cells``, and ``n_spanning``, ``n_dead_end``, ``n_trapped``.
+    """
+
+    @property
+    def axis(self) -> Axis: ...
+    @property
+    def classes(self) -> npt.NDArray[np.uint8]: ...
+    @property
+    def spanning_volume(self) -> float: ...
+    @property
+    def dead_end_volume(self) -> float: ...
+    @property
+    def trapped_volume(self) -> float: ...
+    @property
+    def free_volume(self) -> float: ...
+    @property
+    def spanning_cells(self) -> int: ...
+    @property
+    def dead_end_cells(self) -> int: ...
+    @property
+    def trapped_cells(self) -> int: ...
+    @property
+    def free_cells(self) -> int: ...
+    @property
+    def n_spanning(self) -> int: ...
+    @property
+    def n_dead_end(self) -> int: ...
+    @property
+    def n_trapped(self) -> int: ...
+
+class FlowSolution:
+    """:func:`solve_reynolds_flow` (frozen): the fields and integrals of one flow solve."""
+
+    @property
+    def pressure(self) -> _F64: ...
+    @property
+    def flux_axis0(self) -> _F64: ...
+    @property
+    def flux_axis1(self) -> _F64: ...
+    @property
+    def flow_rate(self) -> float: ...
+    @property
+    def inlet_flow_rate(self) -> float: ...
+    @property
+    def conductance(self) -> float: ...
+    @property
+    def permeability(self) -> float: ...
+    @property
+    def residual(self) -> float: ...
+    @property
+    def conservation(self) -> float: ...
+    @property
+    def iterations(self) -> int: ...
+    @property
+    def n_unknowns(self) -> int: ...
+    @property
+    def levels(self) -> int: ...
+    @property
+    def solver(self) -> str: ...
+    @property
+    def seconds(self) -> float: ...
+    @property
+    def labelled(self) -> bool:
+        """True when the solve labelled the open cells itself (no ``labels`` given)."""
 
 def kernel_table(
     ny: int, nx: int, dx: float, e_star: float, memory_limit: int | None = None
@@ -217,31 +283,27 @@ def label_clusters(
     Ctrl-C raises ``KeyboardInterrupt``. Bad arguments raise ``ValueError``.
     """
 
-def classify_clusters(
+def label_open(
     gap: npt.NDArray[np.float64],
     dx: float,
     contact: npt.NDArray[np.bool_] | None = None,
     connectivity: int = 4,
     periodic_axis0: bool = False,
     periodic_axis1: bool = False,
-    flow: str = "0",
     threads: int | None = None,
-) -> ClusterResult:
-    """Labels the free region and classifies its clusters for flow along ``flow``.
-
-    Free cells are ``~contact`` when a contact mask is given, else ``gap > 0``. ``gap`` must be
-    finite everywhere; ``dx > 0``. ``flow``: ``"0"``, ``"1"``, ``"either"`` or ``"both"``; wrap
-    along a flow axis is a ``ValueError`` (a periodic surface wraps across the flow).
-
-    Keys: ``labels`` (``uint32``, as :func:`label_clusters`), ``n_clusters``; per cluster
-    (entry ``k − 1`` for label ``k``): ``areas`` (cells, ``uint64``), ``volumes``
-    (``Σ g·dx²``, ``float64``), ``touches`` (bit flags 1 first row, 2 last row, 4 first column,
-    8 last column, ``uint8``), ``classes`` (1 spanning, 2 dead-end, 3 trapped, ``uint8``);
-    totals ``spanning_volume``, ``dead_end_volume``, ``trapped_volume``, ``free_volume``
-    (compensated sums over clusters, so the three classes add up to ``free_volume`` to a few
-    ulps), ``spanning_area``, ``dead_end_area``, ``trapped_area``, ``free_area`` (cells),
-    ``n_spanning``, ``n_dead_end``, ``n_trapped``.
+) -> Labelling:
+    """Labels the open cells of a gap once: not in contact and ``g > 0`` (no contact mask:
+    ``g > 0``), the one rule the flow uses too. ``gap`` must be finite everywhere; ``dx > 0``.
+    Per-cluster cells, volumes and touch flags come with the labels (:class:`Labelling`).
     """
+
+def classify(
+    labelling: Labelling, axes: list[Axis], threads: int | None = None
+) -> list[Classification]:
+    """Percolation classes of a labelling's clusters for flow along each of ``axes`` (0, 1,
+    ``"either"`` or ``"both"``), one :class:`Classification` per axis in order: per-cluster
+    work only, no labelling. Wrap along a flow axis is a ``ValueError`` (a periodic surface
+    wraps across the flow)."""
 
 def solve_reynolds_flow(
     gap: npt.NDArray[np.float64],
@@ -256,25 +318,29 @@ def solve_reynolds_flow(
     memory_limit: int | None = None,
     solver: _Literal["auto", "cholesky", "multigrid"] = "auto",
     threads: int | None = None,
-) -> FlowResult:
+    labels: Labelling | None = None,
+) -> FlowSolution:
     """Steady Reynolds flow ``∇·(g³/(12η) ∇p) = 0`` through the gap (docs/flow.md).
 
     Cell-centred finite volumes, harmonic-mean faces, reservoirs at ``pressure_drop`` (inlet,
     before the first index along ``axis``) and 0 (outlet) half a cell from the boundary
-    cells; no-flux side walls, or wrap across the flow with ``periodic``. Closed cells:
-    ``contact`` where given, else ``gap ≤ 0``. ``solver``: "cholesky" (sparse Cholesky, refined
-    with double-double residuals), "multigrid" (conjugate gradients with an aggregation
-    multigrid preconditioner to ``‖b − Ax‖/‖b‖ ≤ tol`` and ``|Q_in − Q_out| ≤ tol·|Q_out|``
-    unless round-off stalls it first) or "auto" (Cholesky whenever its factor fits in
+    cells; no-flux side walls, or wrap across the flow with ``periodic``. Open cells: not in
+    ``contact`` and ``g > 0`` (as :func:`label_open`). ``labels``: a :class:`Labelling` of
+    these open cells with connectivity 4 and the flow's wrap, used instead of labelling
+    again (``ValueError`` naming ``labels`` otherwise). ``axis``: 0 or 1. ``solver``:
+    "cholesky" (sparse Cholesky, refined with double-double residuals), "multigrid"
+    (conjugate gradients with an aggregation multigrid preconditioner to
+    ``‖b − Ax‖/‖b‖ ≤ tol`` and ``|Q_in − Q_out| ≤ tol·|Q_out|`` unless round-off stalls it
+    first) or "auto" (Cholesky whenever its factor fits in
     ``memory_limit`` and the available memory, multigrid otherwise). Returns a
-    dict: ``pressure`` (ny, nx; NaN on closed cells and on clusters joined to no
+    :class:`FlowSolution`: ``pressure`` (ny, nx; NaN on closed cells and on clusters joined to no
     reservoir), ``flux_axis0`` (ny + 1, nx),
     ``flux_axis1`` (ny, nx + 1) (volume per time through each face, positive towards
     increasing index), ``flow_rate`` (outlet), ``inlet_flow_rate``, ``conductance``
     (``Q/Δp``), ``permeability`` (``Q η L/(W Δp)``), ``residual``, ``conservation``
     (largest net cell flux / Q), ``iterations``,
     ``n_unknowns``, ``levels``, ``solver`` (the one that ran: "cholesky", "multigrid" or
-    "none" when nothing spans), ``seconds``. ``InvalidArgumentError`` for bad input,
+    "none" when nothing spans), ``seconds``, ``labelled``. ``InvalidArgumentError`` for bad input,
     ``NotConvergedError`` past ``max_iter`` (default 20000), ``ProblemTooLargeError`` above
     ``memory_limit`` bytes. ``threads``: run on a kept pool of that many threads (default:
     the solver pool, all cores); the result does not depend on it. The GIL is released;

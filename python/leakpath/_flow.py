@@ -31,7 +31,6 @@ hydraulic aperture ``(12 K)^{1/3}`` (``g`` for plates).
 from __future__ import annotations
 
 import math
-import numbers
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -283,11 +282,7 @@ def flow(
             below ~1e-21 of the wide cells between them).
         ProblemTooLargeError: the solve would need more than ``memory_limit`` bytes.
     """
-    if isinstance(axis, (bool, np.bool_)) or not isinstance(axis, numbers.Integral):
-        raise InvalidArgumentError(f"axis: must be 0 or 1, got {axis!r}", argument="axis")
-    if int(axis) not in (0, 1):
-        raise InvalidArgumentError(f"axis: must be 0 or 1, got {axis!r}", argument="axis")
-    axis = int(axis)
+    axis = _validate.flow_axis(axis)
     eta = _number("viscosity", viscosity, positive=True)
     if not isinstance(gas, (bool, np.bool_)):
         raise InvalidArgumentError(f"gas: must be True or False, got {gas!r}", argument="gas")
@@ -338,6 +333,7 @@ def flow(
     limit = _validate.memory_limit(memory_limit)
 
     boundary = None
+    state = None
     if _is_state(state_or_gap):
         state = state_or_gap
         if dx is not None:
@@ -408,6 +404,15 @@ def flow(
     threads = _validate.threads(threads)
     if limit is None:
         limit = default_memory_limit()
+    labels = None
+    if state is not None:
+        # The state's one labelling of its open cells (4-connectivity, wrap across the flow),
+        # shared with its percolation classes: the solve does not label again.
+        from ._percolation import _wrap_for, state_labelling
+
+        labels = state_labelling(
+            state, connectivity=4, wrap=_wrap_for(axis, wrap), threads=threads
+        )
     res = _core.solve_reynolds_flow(
         gap,
         dx_f,
@@ -421,18 +426,19 @@ def flow(
         memory_limit=limit,
         solver=solver,
         threads=None if threads is None else int(threads),
+        labels=labels,
     )
-    conductance = float(res["conductance"])
-    permeability = float(res["permeability"])
-    q_out, q_in = float(res["flow_rate"]), float(res["inlet_flow_rate"])
-    pressure, f0, f1 = res["pressure"], res["flux_axis0"], res["flux_axis1"]
+    conductance = float(res.conductance)
+    permeability = float(res.permeability)
+    q_out, q_in = float(res.flow_rate), float(res.inlet_flow_rate)
+    pressure, f0, f1 = res.pressure, res.flux_axis0, res.flux_axis1
     gas_fields: dict[str, Any] = {}
     if gas:
         # The solve ran at unit Δφ: its rates are C and the fluxes C-scaled. Mass flow
         # ṁ = C (p_in − p_out)(p_in + p_out)/(2 R_s T); volume flow at the outlet ṁ R_s T/p_out.
         diff, tot = p_in - p_out, p_in + p_out
         pair = (diff, tot) if diff != 0.0 else (0.0,)
-        spans = bool(res["n_unknowns"])
+        spans = bool(res.n_unknowns)
         mass_s = _scaled((q_out, *pair), (2.0, r_s, temp))
         mass = _value(*mass_s)
         if spans:
@@ -484,16 +490,16 @@ def flow(
         pressure=pressure,
         flux_axis0=f0,
         flux_axis1=f1,
-        residual=float(res["residual"]),
-        conservation=float(res["conservation"]),
-        iterations=int(res["iterations"]),
-        n_unknowns=int(res["n_unknowns"]),
-        solver=str(res["solver"]),
+        residual=float(res.residual),
+        conservation=float(res.conservation),
+        iterations=int(res.iterations),
+        n_unknowns=int(res.n_unknowns),
+        solver=str(res.solver),
         axis=axis,
         viscosity=eta,
         pressure_drop=dp,
         periodic=wrap,
         dx=dx_f,
-        seconds=float(res["seconds"]),
+        seconds=float(res.seconds),
         **gas_fields,
     )

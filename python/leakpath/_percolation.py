@@ -13,18 +13,20 @@ Definitions (``docs/conventions.md``):
 * With periodic wrap across the other axis (a periodic surface: ``boundary="periodic"``), the
   first and last index along that axis are neighbours, and that axis has no boundary; only
   the inlet and outlet edges of the flow axis count as boundary then.
-* Volumes are ``Σ g·dx²`` over a cluster's cells (length³, the surface's units); areas are cell
-  counts (multiply by ``dx²`` for length²). The free volume splits exactly into the classes::
+* Volumes are ``Σ g·dx²`` over a cluster's cells (length³, the surface's unit cubed); areas
+  are ``cells·dx²`` (length²), and the cell counts are kept under names ending in
+  ``cells``/``cell_counts``. The free volume splits exactly into the classes::
 
       V = V_pg + V_dead + V_trapped
 
   each a compensated sum over clusters, so the identity holds to a few ulps. ``V`` sums the
   free cells only: the contact state's ``dx² Σ g`` less the gaps left on contact cells
   (zero for an exact solve).
-* Given a plain gap array and no contact mask, the cells with ``g > 0`` are free. With a
-  contact mask (a contact state's ``p > 0``), a cell is free when it is not in contact *and*
-  ``g > 0``: the one definition of an *open* cell that :func:`leakpath.flow` uses too, so
-  the flow leaks exactly when the free region percolates.
+* A cell is *open* when it is not in contact *and* ``g > 0`` (no contact mask: ``g > 0``).
+  The rule is written once, in the core (``clusters::is_open``), and the percolation and
+  :func:`leakpath.flow` both use it, so the flow leaks exactly when the free region
+  percolates. The open cells of a contact state are labelled once (:func:`state_labelling`)
+  and that labelling serves every axis, the class volumes and the flow.
 
 The labelling runs in Rust on all cores (``threads`` to limit it); labels are numbered
 ``1..K`` in raster order of each cluster's first cell, identical for any thread count.
@@ -32,6 +34,7 @@ The labelling runs in Rust on all cores (``threads`` to limit it); labels are nu
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -42,6 +45,7 @@ from .errors import InvalidArgumentError
 
 __all__ = [
     "CLASS_NAMES",
+    "state_labelling",
     "CONTACT",
     "DEAD_END",
     "SPANNING",
@@ -49,6 +53,7 @@ __all__ = [
     "Percolation",
     "label",
     "percolation",
+    "percolations",
 ]
 
 #: Class codes used by :attr:`Percolation.classes` and :meth:`Percolation.class_map`.
@@ -68,7 +73,7 @@ class Percolation:
         labels: ``uint32`` array of the grid's shape: 0 on contact cells, ``1..n_clusters``
             on free cells, numbered in raster order of each cluster's first cell.
         n_clusters: number of clusters ``K``.
-        areas: cells per cluster (``uint64``; × ``dx²`` for length²).
+        cell_counts: cells per cluster (``uint64``); :attr:`areas` gives them in length².
         volumes: ``Σ g·dx²`` per cluster (length³).
         classes: class code per cluster (``uint8``): ``SPANNING`` 1, ``DEAD_END`` 2,
             ``TRAPPED`` 3.
@@ -76,7 +81,10 @@ class Percolation:
         dead_end_volume: ``V_dead``, volume of the dead-end clusters.
         trapped_volume: ``V_trapped``, volume of the trapped clusters.
         free_volume: ``V = V_pg + V_dead + V_trapped``, ``Σ g·dx²`` over all free cells.
-        spanning_area, dead_end_area, trapped_area, free_area: cell counts of the same sets.
+        spanning_cells, dead_end_cells, trapped_cells, free_cells: cell counts of the same
+            sets.
+        spanning_area, dead_end_area, trapped_area, free_area: their areas, the count ×
+            ``dx²`` (length², the surface's unit squared).
         n_spanning, n_dead_end, n_trapped: number of clusters of each class.
         axis: flow direction: 0, 1, ``"either"`` or ``"both"``.
         connectivity: 4 or 8.
@@ -86,17 +94,21 @@ class Percolation:
 
     labels: np.ndarray = field(repr=False)
     n_clusters: int
-    areas: np.ndarray = field(repr=False)
+    cell_counts: np.ndarray = field(repr=False)
     volumes: np.ndarray = field(repr=False)
     classes: np.ndarray = field(repr=False)
     spanning_volume: float
     dead_end_volume: float
     trapped_volume: float
     free_volume: float
-    spanning_area: int
-    dead_end_area: int
-    trapped_area: int
-    free_area: int
+    spanning_cells: int
+    dead_end_cells: int
+    trapped_cells: int
+    free_cells: int
+    spanning_area: float
+    dead_end_area: float
+    trapped_area: float
+    free_area: float
     n_spanning: int
     n_dead_end: int
     n_trapped: int
@@ -125,6 +137,11 @@ class Percolation:
     def shape(self) -> tuple[int, int]:
         return self.labels.shape  # type: ignore[return-value]
 
+    @property
+    def areas(self) -> np.ndarray:
+        """Area of each cluster, ``cells × dx²`` (length²)."""
+        return self.cell_counts * (self.dx * self.dx)
+
     def class_map(self) -> np.ndarray:
         """Class of every cell (``int8``, the grid's shape): 0 contact, 1 spanning,
         2 dead-end, 3 trapped — for plotting (names in :data:`CLASS_NAMES`)."""
@@ -142,10 +159,57 @@ class Percolation:
         }
 
 
-def _flow(axis: Any) -> tuple[str, int | str]:
-    """Rust flow name and the canonical axis for ``axis``."""
-    canonical = _validate.axis(axis)
-    return str(canonical), canonical
+def _label_open(
+    gap: np.ndarray,
+    dx: float,
+    contact: np.ndarray | None,
+    connectivity: int,
+    wrap: tuple[bool, bool],
+    threads: int | None,
+) -> Any:
+    """The one labelling of the open cells (``not contact and g > 0``, the rule written once
+    in the core, ``clusters::is_open``): labels and per-cluster cells, volumes and touch
+    flags (:class:`leakpath._core.Labelling`). Every percolation class, volume and flow of a
+    gap reuses it."""
+    return _core.label_open(
+        gap,
+        dx,
+        contact=contact,
+        connectivity=connectivity,
+        periodic_axis0=wrap[0],
+        periodic_axis1=wrap[1],
+        threads=threads,
+    )
+
+
+def _wrap_for(axis: int | str, periodic: bool) -> tuple[bool, bool]:
+    """``(wrap rows, wrap columns)`` for flow along ``axis``: a periodic surface wraps across
+    the flow (columns for axis 0, rows for axis 1); ``"either"``/``"both"`` never wrap."""
+    if not periodic or axis not in (0, 1):
+        return (False, False)
+    return (axis == 1, axis == 0)
+
+
+def state_labelling(
+    state: Any, *, connectivity: int = 4, wrap: tuple[bool, bool], threads: int | None = None
+) -> Any:
+    """The labelling of a contact state's open cells, made once per ``(connectivity, wrap)``
+    and kept on the state: its percolation classes for every axis, its volumes and its flow
+    all read the same labels (a free boundary has a single labelling per state)."""
+    key = (connectivity, bool(wrap[0]), bool(wrap[1]))
+    cache = state.__dict__.setdefault("_labelling_cache", {})
+    if key not in cache:
+        gap = _validate.real_array("gap", state.gap, finite=False, copy=False)
+        contact = np.asarray(state.contact)
+        if contact.dtype != np.bool_:
+            raise InvalidArgumentError(
+                f"contact: must be a boolean mask (e.g. pressure > 0), got dtype {contact.dtype}"
+            )
+        contact = np.ascontiguousarray(contact)
+        cache[key] = _label_open(
+            gap, _validate.spacing("dx", state.dx), contact, connectivity, key[1:], threads
+        )
+    return cache[key]
 
 
 def _is_state(obj: Any) -> bool:
@@ -168,8 +232,8 @@ def percolation(
         state_or_gap: a solved contact state (anything with the attributes ``gap``,
             ``contact`` (mask ``p > 0``), ``dx`` and ``boundary``, like
             :class:`leakpath.contact.ContactState`), or a 2-D array of gaps ``g`` (length).
-            For an array, free cells are ``~contact`` when ``contact`` is given, else
-            ``g > 0``.
+            For an array, open cells are ``~contact & (g > 0)`` when ``contact`` is given,
+            else ``g > 0``.
         axis: flow direction: 0 (default), 1, ``"either"`` or ``"both"``.
         connectivity: 4 (default) or 8.
         periodic: wrap across the axis that is not the flow axis. ``None`` (default): wrap
@@ -182,18 +246,19 @@ def percolation(
         threads: number of threads (default: all cores). Results do not depend on it.
 
     Returns:
-        :class:`Percolation`.
+        :class:`Percolation`. For a contact state, the labelling of its open cells is made
+        once and kept on the state (:func:`state_labelling`): further axes, the flow and
+        the volumes reuse it.
 
     Raises:
         ValueError: naming the argument — a non-2-D or empty gap, NaN or infinite gaps, a
             contact mask of another shape or not boolean, a bad ``axis``, ``connectivity``,
             ``periodic``, ``dx`` or ``threads``.
     """
-    flow, axis_used = _flow(axis)
+    axis_used = _validate.axis(axis)
     conn = _validate.connectivity(connectivity)
     threads = _validate.threads(threads)
 
-    boundary = None
     if _is_state(state_or_gap):
         state = state_or_gap
         if dx is not None:
@@ -204,20 +269,23 @@ def percolation(
             raise InvalidArgumentError(
                 "contact: taken from the contact state (p > 0); pass a gap array to set it"
             )
-        gap_in, contact, dx = state.gap, state.contact, state.dx
-        boundary = getattr(state, "boundary", None)
-    else:
-        gap_in = state_or_gap
-        if dx is None:
-            raise InvalidArgumentError(
-                "dx: the grid spacing is required when a gap array is given"
-            )
+        if periodic is None:
+            wrap_on = getattr(state, "boundary", None) == "periodic" and axis_used in (0, 1)
+        else:
+            wrap_on = _check_wrap(periodic, axis_used)
+        dx_f = _validate.spacing("dx", state.dx)
+        lab = state_labelling(
+            state, connectivity=conn, wrap=_wrap_for(axis_used, wrap_on), threads=threads
+        )
+        return _classified(lab, axis_used, conn, wrap_on, dx_f, threads)
 
+    gap_in = state_or_gap
+    if dx is None:
+        raise InvalidArgumentError("dx: the grid spacing is required when a gap array is given")
     # NaN and infinite gaps are refused by the core, with the same message.
     gap = _validate.real_array("gap", gap_in, finite=False, copy=False)
     if gap.size == 0:
         raise InvalidArgumentError(f"gap: must have at least one cell, got shape {gap.shape}")
-
     if contact is not None:
         contact = np.asarray(contact)
         if contact.dtype != np.bool_:
@@ -228,55 +296,87 @@ def percolation(
             raise InvalidArgumentError(
                 f"contact: must have the gap's shape {gap.shape}, got {contact.shape}"
             )
-        # One definition of an open cell for the percolation and the flow
-        # (docs/conventions.md): not in contact and g > 0. A free cell whose gap an iterative
-        # solve left at or below 0 within its tolerance conducts nothing, so it is closed.
-        contact = contact | ~(gap > 0)
-
+        contact = np.ascontiguousarray(contact)
     dx_f = _validate.spacing("dx", dx)
+    wrap_on = False if periodic is None else _check_wrap(periodic, axis_used)
+    lab = _label_open(gap, dx_f, contact, conn, _wrap_for(axis_used, wrap_on), threads)
+    return _classified(lab, axis_used, conn, wrap_on, dx_f, threads)
 
-    if periodic is None:
-        wrap = boundary == "periodic" and flow in ("0", "1")
-    else:
-        wrap = _validate.flag("periodic", periodic)
-        if wrap and flow not in ("0", "1"):
-            raise InvalidArgumentError(
-                f"periodic: wrap is across the flow axis, so it needs axis 0 or 1, "
-                f"not {axis_used!r} (every edge is an inlet or outlet there)"
-            )
 
-    res = _core.classify_clusters(
-        gap,
-        dx_f,
-        contact=contact,
-        connectivity=conn,
-        # A periodic surface wraps across the flow: axis 1 for flow along axis 0, and back.
-        periodic_axis0=wrap and flow == "1",
-        periodic_axis1=wrap and flow == "0",
-        flow=flow,
-        threads=None if threads is None else int(threads),
-    )
+def _check_wrap(periodic: Any, axis: int | str) -> bool:
+    wrap = _validate.flag("periodic", periodic)
+    if wrap and axis not in (0, 1):
+        raise InvalidArgumentError(
+            f"periodic: wrap is across the flow axis, so it needs axis 0 or 1, "
+            f"not {axis!r} (every edge is an inlet or outlet there)"
+        )
+    return wrap
+
+
+def percolations(
+    state: Any,
+    axes: Sequence[int | str],
+    *,
+    connectivity: int = 4,
+    threads: int | None = None,
+) -> list[Percolation]:
+    """:func:`percolation` of a contact state along each of ``axes`` (the state's wrap, as
+    with ``periodic=None``), from its one labelling per wrap (:func:`state_labelling`) and
+    one classification call per labelling: what a sweep level tabulates."""
+    canon = [_validate.axis(a, "axes") for a in axes]
+    conn = _validate.connectivity(connectivity)
+    threads = _validate.threads(threads)
+    dx_f = _validate.spacing("dx", state.dx)
+    periodic = getattr(state, "boundary", None) == "periodic"
+    groups: dict[tuple[bool, bool], list[int | str]] = {}
+    for a in dict.fromkeys(canon):  # distinct axes, in order
+        groups.setdefault(_wrap_for(a, periodic), []).append(a)
+    found: dict[int | str, Percolation] = {}
+    for wrap, group in groups.items():
+        lab = state_labelling(state, connectivity=conn, wrap=wrap, threads=threads)
+        for a, res in zip(group, _core.classify(lab, group, threads=threads), strict=True):
+            found[a] = _percolation_of(lab, res, a, conn, any(wrap), dx_f)
+    return [found[a] for a in canon]
+
+
+def _classified(
+    lab: Any, axis: int | str, conn: int, wrap: bool, dx: float, threads: int | None
+) -> Percolation:
+    """:class:`Percolation` of a labelling for ``axis`` (per-cluster work only)."""
+    (res,) = _core.classify(lab, [axis], threads=threads)
+    return _percolation_of(lab, res, axis, conn, wrap, dx)
+
+
+def _percolation_of(
+    lab: Any, res: Any, axis: int | str, conn: int, wrap: bool, dx: float
+) -> Percolation:
+    """:class:`Percolation` from a labelling and its classification for ``axis``."""
+    cell = dx * dx
     return Percolation(
-        labels=res["labels"],
-        n_clusters=int(res["n_clusters"]),
-        areas=res["areas"],
-        volumes=res["volumes"],
-        classes=res["classes"],
-        spanning_volume=float(res["spanning_volume"]),
-        dead_end_volume=float(res["dead_end_volume"]),
-        trapped_volume=float(res["trapped_volume"]),
-        free_volume=float(res["free_volume"]),
-        spanning_area=int(res["spanning_area"]),
-        dead_end_area=int(res["dead_end_area"]),
-        trapped_area=int(res["trapped_area"]),
-        free_area=int(res["free_area"]),
-        n_spanning=int(res["n_spanning"]),
-        n_dead_end=int(res["n_dead_end"]),
-        n_trapped=int(res["n_trapped"]),
-        axis=axis_used,
+        labels=lab.labels,
+        n_clusters=int(lab.n_clusters),
+        cell_counts=lab.areas,
+        volumes=lab.volumes,
+        classes=res.classes,
+        spanning_volume=float(res.spanning_volume),
+        dead_end_volume=float(res.dead_end_volume),
+        trapped_volume=float(res.trapped_volume),
+        free_volume=float(res.free_volume),
+        spanning_cells=int(res.spanning_cells),
+        dead_end_cells=int(res.dead_end_cells),
+        trapped_cells=int(res.trapped_cells),
+        free_cells=int(res.free_cells),
+        spanning_area=int(res.spanning_cells) * cell,
+        dead_end_area=int(res.dead_end_cells) * cell,
+        trapped_area=int(res.trapped_cells) * cell,
+        free_area=int(res.free_cells) * cell,
+        n_spanning=int(res.n_spanning),
+        n_dead_end=int(res.n_dead_end),
+        n_trapped=int(res.n_trapped),
+        axis=axis,
         connectivity=conn,
         periodic=wrap,
-        dx=dx_f,
+        dx=dx,
     )
 
 

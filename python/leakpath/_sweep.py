@@ -89,6 +89,7 @@ import numpy as np
 from . import _validate, leakage  # leakage: leak-rate columns Q, K, K_star
 from ._checkpoint import CHECKPOINT_FORMAT, CheckpointMismatch, _Checkpoint, _Level
 from ._core import __version__
+from ._percolation import percolations
 from ._table import COLUMNS, CSV_COLUMNS, SweepResult, _finish_row, surface_sha256
 from .contact import AUTO_ACTIVE_SET_MAX_POINTS, SOLVERS, ContactProblem, ContactState
 from .errors import InvalidArgumentError, NotConvergedError
@@ -141,32 +142,16 @@ def _resolve_approaches(problem: ContactProblem, levels: int, approaches: Any) -
     limit = problem.max_approach
     if approaches is None:
         return [float(limit * k / levels) for k in range(levels + 1)]
-    arr = _validate.real_array("approaches", approaches, ndim=1, finite=False)
-    if arr.size == 0:
-        raise InvalidArgumentError("approaches: must be a non-empty 1-D sequence of numbers")
-    if not np.all(np.isfinite(arr)):
-        raise InvalidArgumentError("approaches: every value must be finite")
-    if np.any(arr < 0):
-        raise InvalidArgumentError(f"approaches: must be ≥ 0, got min {arr.min()!r}")
-    if np.any(np.diff(arr) <= 0):
-        raise InvalidArgumentError("approaches: must be strictly increasing")
-    if problem.boundary == "periodic" and arr[-1] > limit * (1 + 1e-12):
-        raise InvalidArgumentError(
-            f"approaches: {arr[-1]!r} exceeds full contact of a periodic surface, "
-            f"max h − mean h = {limit!r}; give approaches ≤ that"
-        )
-    return [float(a) for a in arr]
+    full = limit if problem.boundary == "periodic" else None
+    return _validate.increasing(
+        "approaches",
+        approaches,
+        lambda v, name: _validate.approach(v, full_contact=full, name=name),
+    )
 
 
 def _resolve_mean_pressures(mean_pressures: Any) -> list[float]:
-    arr = _validate.real_array("mean_pressures", mean_pressures, ndim=1, finite=False)
-    if arr.size == 0:
-        raise InvalidArgumentError("mean_pressures: must be a non-empty 1-D sequence of numbers")
-    if not (np.all(np.isfinite(arr)) and np.all(arr > 0)):
-        raise InvalidArgumentError("mean_pressures: every value must be finite and > 0")
-    if np.any(np.diff(arr) <= 0):
-        raise InvalidArgumentError("mean_pressures: must be strictly increasing")
-    return [float(v) for v in arr]
+    return _validate.increasing("mean_pressures", mean_pressures, _validate.mean_pressure)
 
 
 def _check_axis(axis: Any) -> Any:
@@ -273,9 +258,9 @@ def _analyse(
     """Row, class map and fields of a solved level, without the leak-rate columns
     (:class:`leakpath.leakage.LevelFlows` adds them)."""
     t_start = time.perf_counter()
-    p0 = state.percolation(axis=0, connectivity=connectivity, threads=threads)
-    p1 = state.percolation(axis=1, connectivity=connectivity, threads=threads)
-    pa = state.percolation(axis=axis, connectivity=connectivity, threads=threads)
+    # One labelling of the level's open cells, classified for both axes and `axis` in one
+    # call; the level's flow reuses the labelling (leakpath._percolation.state_labelling).
+    p0, p1, pa = percolations(state, (0, 1, axis), connectivity=connectivity, threads=threads)
     mom = nayak_moments(state.deformed, state.dx)
     n_contact = int(np.count_nonzero(state.contact))
     row: dict[str, Any] = {

@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Any, overload
 
 import numpy as np
 
-from . import leakage  # leak-rate columns Q, K, K_star
+from . import _validate, leakage  # leakage: leak-rate columns Q, K, K_star
 from ._core import __version__
 from ._io import (
     atomic_write_bytes,
@@ -204,8 +204,7 @@ class SweepResult:
     def __repr__(self) -> str:
         # The rows, fields and masks are tables and grids: summarise them in two lines.
         ny, nx = self.surface.shape
-        unit = self.surface.metadata.get("unit", self.surface.metadata.get("length_unit"))
-        u = f" {unit}" if unit else ""
+        u = f" {self.surface.unit}"
         head = (
             f"SweepResult({len(self.rows)} levels on a {ny}x{nx} surface, "
             f"dx={self.surface.dx:.6g}{u}, boundary={self.parameters.get('boundary')!r}, "
@@ -261,15 +260,33 @@ class SweepResult:
         """The CSV table: header + one line per level, floats as ``repr`` (exact round trip)."""
         return _csv_text(self.rows)
 
-    def to_csv(self, path: PathLike) -> Path:
-        """Write :meth:`csv_text` to ``path`` atomically; returns the path."""
-        return atomic_write_text(path, self.csv_text())
+    @property
+    def units(self) -> dict[str, str]:
+        """Unit of every column: lengths ``L`` in the surface's unit
+        (:attr:`leakpath.Surface.unit`), pressures in units of ``E`` (``"E"``), ``"1"`` for
+        dimensionless columns, ``""`` for text."""
+        return _units(self.surface.unit, "E")
+
+    def headers(self) -> list[str]:
+        """Column headers with their units, ``"approach [µm]"``, ``"V_pg_star [1]"``, in CSV
+        order (text columns bare)."""
+        units = self.units
+        return [f"{c} [{units[c]}]" if units.get(c) else c for c in CSV_COLUMNS]
+
+    def to_csv(self, path: PathLike, *, units: bool = False) -> Path:
+        """Write :meth:`csv_text` to ``path`` atomically; returns the path. ``units=True``
+        writes :meth:`headers` (``"approach [µm]"``) as the header line instead of the bare
+        column names (which tables read back by name, e.g. the paper's, keep)."""
+        text = self.csv_text()
+        if _validate.flag("units", units):
+            _, _, body = text.partition("\n")
+            text = ",".join(csv_quote(h) for h in self.headers()) + "\n" + body
+        return atomic_write_text(path, text)
 
     def metadata(self) -> dict[str, Any]:
         """Everything :meth:`to_json` writes, as a dict."""
         s = self.surface
-        unit = s.metadata.get("unit", s.metadata.get("length_unit"))
-        length_unit = str(unit) if unit else "L"
+        length_unit = s.unit
         rows = []
         for row, sec in zip(self.rows, self.seconds, strict=True):
             rows.append({**row, "seconds": sec})

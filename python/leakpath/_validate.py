@@ -260,6 +260,57 @@ def axis(value: Any, name: str = "axis") -> int | str:
     )
 
 
+def flow_axis(value: Any, name: str = "axis") -> int:
+    """The axis a leak flows along: 0 or 1 (the percolation axes ``"either"``/``"both"`` are
+    refused: a flow has one direction). The one check behind :func:`leakpath.flow`, a
+    sweep's ``flow_axis`` and the ensembles; the value crosses into the core as is."""
+    v = _scalar(value)
+    if _is_int(v) and int(v) in (0, 1):
+        return int(v)
+    raise InvalidArgumentError(
+        f"{name}: must be 0 or 1 (the leak flows along one axis), got {describe(value)}",
+        argument=name,
+    )
+
+
+def approach(
+    value: Any, *, full_contact: float | None = None, name: str = "approach"
+) -> float:
+    """An imposed approach ``Δ``: finite and ``≥ 0``; on a periodic surface
+    (``full_contact = max h − mean h``) at most full contact, values within round-off above
+    it taken as it. The one check behind :meth:`leakpath.ContactProblem.solve` and a
+    sweep's ``approaches``."""
+    a = real(name, value, low=0.0, what="a finite number ≥ 0")
+    if full_contact is None:
+        return a
+    if a > full_contact * (1 + 1e-12) + 1e-300:
+        raise InvalidArgumentError(
+            f"{name}: {a:.6g} exceeds full contact (max h − mean h) = {full_contact:.6g} of a "
+            "periodic surface, where u has zero mean and the flat cannot move further; "
+            "give an approach ≤ that",
+            argument=name,
+        )
+    return min(a, full_contact)
+
+
+def mean_pressure(value: Any, name: str = "mean_pressure") -> float:
+    """An imposed mean pressure ``p̄ = F/A0``: finite and ``> 0``. The one check behind
+    :meth:`leakpath.ContactProblem.solve` and a sweep's ``mean_pressures``."""
+    return positive(name, value, what="a finite number > 0 (a mean pressure)")
+
+
+def increasing(name: str, values: Any, check: Any) -> list[float]:
+    """A non-empty, strictly increasing 1-D sequence whose every value passes
+    ``check(value, name=name)`` (:func:`approach`, :func:`mean_pressure`)."""
+    arr = real_array(name, values, ndim=1, finite=False)
+    if arr.size == 0:
+        raise InvalidArgumentError(f"{name}: must be a non-empty 1-D sequence of numbers")
+    out = [check(float(v), name=name) for v in arr]
+    if any(b <= a for a, b in zip(out, out[1:], strict=False)):
+        raise InvalidArgumentError(f"{name}: must be strictly increasing")
+    return out
+
+
 def connectivity(value: Any, name: str = "connectivity") -> int:
     """4 (edge neighbours) or 8 (edges and corners)."""
     v = _scalar(value)

@@ -26,8 +26,9 @@ from typing import TYPE_CHECKING, Any, Literal
 import numpy as np
 
 from . import _core, _validate
+from ._flow import DEFAULT_TOL as _FLOW_TOL
 from .errors import InvalidArgumentError
-from .surfaces import Surface
+from .surfaces import Surface, check_slope
 
 if TYPE_CHECKING:
     from ._flow import Flow
@@ -222,11 +223,47 @@ class ContactState:
             "seconds": self.seconds,
         }
 
-    def flow(self, **kw: Any) -> Flow:
-        """Leak rate: Reynolds flow through this gap (see :func:`leakpath.flow.flow`)."""
+    def flow(
+        self,
+        *,
+        axis: int = 0,
+        viscosity: float = 1.0,
+        pressure_drop: float | None = None,
+        periodic: bool | None = None,
+        tol: float = _FLOW_TOL,
+        max_iter: int | None = None,
+        memory_limit: int | None = None,
+        solver: str = "auto",
+        gas: bool = False,
+        inlet_pressure: float | None = None,
+        outlet_pressure: float | None = None,
+        gas_constant: float | None = None,
+        temperature: float | None = None,
+        threads: int | None = None,
+    ) -> Flow:
+        """Leak rate: Reynolds flow through this gap (:func:`leakpath.flow`, whose docstring
+        gives every argument and unit; ``dx``, ``contact`` and the wrap come from this
+        state). It reuses the labelling of this state's open cells that its percolation
+        made (or makes it for both)."""
         from ._flow import flow
 
-        return flow(self, **kw)
+        return flow(
+            self,
+            axis=axis,
+            viscosity=viscosity,
+            pressure_drop=pressure_drop,
+            periodic=periodic,
+            tol=tol,
+            max_iter=max_iter,
+            memory_limit=memory_limit,
+            solver=solver,
+            gas=gas,
+            inlet_pressure=inlet_pressure,
+            outlet_pressure=outlet_pressure,
+            gas_constant=gas_constant,
+            temperature=temperature,
+            threads=threads,
+        )
 
 
 def _describe_start(value: Any) -> str:
@@ -265,6 +302,7 @@ class ContactProblem:
         memory_limit: int | None = None,
     ) -> None:
         self.surface = _as_surface(surface, dx)
+        check_slope(self.surface, stacklevel=2)  # the small-slope model's range
         self.boundary = _validate.boundary(boundary)
         self.e_star = contact_modulus(E, nu)
         _validate.contact_scales(self.e_star, self.surface.dx, self.surface.height_range)
@@ -296,19 +334,10 @@ class ContactProblem:
         return self.h_range
 
     def _check_approach(self, approach: float) -> float:
-        a = _validate.real("approach", approach, low=0.0, what="a finite number ≥ 0")
-        if self.boundary == "free":
-            # A free-boundary patch keeps gaining contact past h_s (about half of it is in
-            # contact at Δ = h_s); any approach is a well-posed problem.
-            return a
-        limit = self.max_approach
-        if a > limit * (1 + 1e-12) + 1e-300:
-            raise InvalidArgumentError(
-                f"approach: {a:.6g} exceeds full contact (max h − mean h) = {limit:.6g} of a "
-                "periodic surface, where u has zero mean and the flat cannot move further; "
-                "give an approach ≤ that"
-            )
-        return min(a, limit)
+        # A free-boundary patch keeps gaining contact past h_s (about half of it is in
+        # contact at Δ = h_s); any approach is a well-posed problem there.
+        full = self.max_approach if self.boundary == "periodic" else None
+        return _validate.approach(approach, full_contact=full)
 
     def solve(
         self,
@@ -364,7 +393,7 @@ class ContactProblem:
                 argument="approach",
             )
         if mean_pressure is not None:
-            pbar = _validate.positive("mean_pressure", mean_pressure)
+            pbar = _validate.mean_pressure(mean_pressure)
             _validate.load_scales(pbar, self.e_star, self.surface.dx)
             if solver in ("active-set", "lawson-hanson"):
                 raise InvalidArgumentError(

@@ -14,6 +14,8 @@ __all__ = [
     "InvalidArgumentError",
     "NotConvergedError",
     "ProblemTooLargeError",
+    "LeakpathWarning",
+    "SlopeWarning",
 ]
 
 
@@ -82,3 +84,14 @@ class ProblemTooLargeError(LeakpathError, MemoryError):
         self.estimate = int(estimate)
         self.limit = int(limit)
         self.what = what
+
+
+class LeakpathWarning(UserWarning):
+    """Base class of the warnings leakpath issues (``warnings.simplefilter("error",
+    leakpath.errors.LeakpathWarning)`` turns them into errors)."""
+
+
+class SlopeWarning(LeakpathWarning):
+    """A surface's rms slope exceeds :data:`leakpath.surfaces.MAX_RMS_SLOPE` (0.3), beyond
+    which the small-slope (half-space) contact and lubrication models lose accuracy (errors
+    of order ``slope²/2``); usually heights and lateral lengths given in different units."""

@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass
-from typing import Any
 
 from ._sweep import sweep
 from ._table import SweepResult
@@ -70,12 +69,17 @@ def paper(
     checkpoint_dir: PathLike | None = None,
     progress: bool = False,
     setup: PaperSetup = PAPER,
-    **sweep_options: Any,
+    axis: int | str = 0,
+    connectivity: int = 4,
+    keep_fields: bool = False,
+    flow: bool | None = None,
+    flow_axis: int | None = None,
 ) -> SweepResult:
     """Run the paper's sweep on :func:`paper_surface` (``seed``).
 
-    ``warm_start=False`` replays the paper's cold start per level. Further keyword arguments
-    (``flow``, ``flow_axis``, ``keep_fields`` …) go to :func:`leakpath.sweep`.
+    ``warm_start=False`` replays the paper's cold start per level. ``axis``,
+    ``connectivity``, ``keep_fields``, ``flow`` and ``flow_axis`` are
+    :func:`leakpath.sweep`'s.
     """
     return sweep(
         paper_surface(seed, setup),
@@ -86,5 +90,9 @@ def paper(
         nu=setup.nu,
         checkpoint_dir=checkpoint_dir,
         progress=progress,
-        **sweep_options,
+        axis=axis,
+        connectivity=connectivity,
+        keep_fields=keep_fields,
+        flow=flow,
+        flow_axis=flow_axis,
     )

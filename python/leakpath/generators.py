@@ -25,9 +25,19 @@ import numpy.typing as npt
 from . import _validate
 from . import moments as _moments
 from .errors import InvalidArgumentError
-from .surfaces import MAX_ABS_HEIGHT, Surface, _check_positive_finite, _check_seed, _Owned
+from .surfaces import (
+    DEFAULT_UNIT,
+    MAX_ABS_HEIGHT,
+    Surface,
+    _check_positive_finite,
+    _check_seed,
+    _Owned,
+    check_slope,
+    check_unit,
+)
 
 __all__ = [
+    "DEFAULT_LENGTH",
     "rmd",
     "spectral",
     "RMD_MEMORY_LIMIT_BYTES",
@@ -38,6 +48,12 @@ __all__ = [
 ]
 
 FloatArray = npt.NDArray[np.float64]
+
+#: Default lateral size of a generated surface, in its unit (:data:`DEFAULT_UNIT`, µm): a
+#: 0.5 mm square. With heights of about 1 µm (RMD's default ``σ0``, spectral's default rms
+#: height) the rms slope stays within the small-slope model: 0.035 for ``rmd(7, 2.1)``,
+#: 0.05 for ``spectral(128, 0.8)`` (``docs/surfaces.md``).
+DEFAULT_LENGTH = 500.0
 
 #: :func:`rmd` refuses grids whose estimated peak memory exceeds this (8 GiB).
 #: The estimate is ``3 · 8 · (2^m + 1)²`` bytes: the height array plus the random normals
@@ -99,7 +115,8 @@ def rmd(
     *,
     seed: int | None,
     sigma0: float = 1.0 / math.sqrt(0.09),
-    length: float = 1.0,
+    length: float = DEFAULT_LENGTH,
+    unit: str = DEFAULT_UNIT,
 ) -> Surface:
     """Random-midpoint-displacement surface (Saupe's MidPointFM2D without addition).
 
@@ -157,16 +174,20 @@ def rmd(
         Seed for ``numpy.random.default_rng``; the same seed gives the same surface bit for
         bit. ``None`` draws fresh entropy, which is recorded in ``metadata["seed"]``.
     sigma0 : float
-        Standard deviation of the corner heights (and the initial ``δ``) [length]; default
-        ``1/√0.09``.
+        Standard deviation of the corner heights (and the initial ``δ``) [unit]; default
+        ``1/√0.09`` (rms heights of about 1.3–1.8 µm after the shift).
     length : float
-        Physical size of the square (``2^m·dx``) [length]; default 1.
+        Physical size of the square (``2^m·dx``) [unit]; default :data:`DEFAULT_LENGTH`
+        (500 µm).
+    unit : str
+        Length unit of ``sigma0``, ``length`` and the result (default ``"µm"``).
 
     Returns
     -------
     Surface
         ``metadata`` records ``generator="rmd"``, ``m``, ``D``, ``H``, ``seed``, ``sigma0``,
-        ``length``.
+        ``length`` and ``unit``. Warns (:class:`leakpath.errors.SlopeWarning`) when its rms
+        slope exceeds :data:`leakpath.surfaces.MAX_RMS_SLOPE`.
 
     Raises
     ------
@@ -180,6 +201,7 @@ def rmd(
     d_frac = _check_fractal_dimension(D)
     sigma0_f = _check_positive_finite("sigma0", sigma0)
     length_f = _check_positive_finite("length", length)
+    unit = check_unit(unit)
     seed_i = _check_seed(seed)
     hurst = 3.0 - d_frac
     dx = length_f / 2**m_int
@@ -245,7 +267,9 @@ def rmd(
         "sigma0": sigma0_f,
         "length": length_f,
     }
-    return Surface(_Owned(h), dx, metadata)
+    surface = Surface(_Owned(h), dx, metadata, unit)
+    check_slope(surface)
+    return surface
 
 
 # ---------------------------------------------------------------------------- spectral
@@ -278,7 +302,8 @@ def spectral(
     hurst: float,
     *,
     seed: int | None,
-    length: float = 1.0,
+    length: float = DEFAULT_LENGTH,
+    unit: str = DEFAULT_UNIT,
     rms_height: float | None = None,
     rms_slope: float | None = None,
     long_cutoff: float | None = None,
@@ -315,19 +340,21 @@ def spectral(
     seed : int or None
         Seed for ``numpy.random.default_rng``; ``None`` draws fresh entropy (recorded).
     length : float
-        Size along x, ``nx·dx`` [length]; default 1.
+        Size along x, ``nx·dx`` [unit]; default :data:`DEFAULT_LENGTH` (500 µm).
+    unit : str
+        Length unit of every length argument and of the result (default ``"µm"``).
     rms_height : float, optional
-        Requested ``√m0 = √(mean((h − h̄)²))`` [length]. Default 1 when neither rms value is
+        Requested ``√m0 = √(mean((h − h̄)²))`` [unit]. Default 1 when neither rms value is
         given.
     rms_slope : float, optional
         Requested ``√(⟨h_x²⟩ + ⟨h_y²⟩) = √(2·m2)`` with the *same non-periodic forward
         differences* as :func:`leakpath.moments.nayak_moments` (so ``nayak_moments`` reports
         exactly ``m2 = rms_slope²/2``). Mutually exclusive with ``rms_height``.
     long_cutoff : float, optional
-        Longest wavelength ``λ_L`` [length]; default the box size ``max(ny, nx)·dx`` (the
+        Longest wavelength ``λ_L`` [unit]; default the box size ``max(ny, nx)·dx`` (the
         lowest non-zero mode).
     short_cutoff : float, optional
-        Shortest wavelength ``λ_s`` [length]; default ``2·dx`` (the Nyquist wavelength).
+        Shortest wavelength ``λ_s`` [unit]; default ``2·dx`` (the Nyquist wavelength).
 
     Returns
     -------
@@ -428,7 +455,9 @@ def spectral(
         "rms_slope": target_slope,
         "wavevector": "q = 2*pi/lambda [rad/length]",
     }
-    return Surface(_Owned(h), dx, metadata)
+    surface = Surface(_Owned(h), dx, metadata, unit)
+    check_slope(surface)
+    return surface
 
 
 

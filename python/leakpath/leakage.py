@@ -33,7 +33,6 @@ from __future__ import annotations
 
 import hashlib
 import math
-import numbers
 import time
 from collections import deque
 from collections.abc import Hashable
@@ -42,7 +41,7 @@ from typing import Any
 
 import numpy as np
 
-from . import _core
+from . import _core, _validate
 from ._flow import flow
 from .errors import InvalidArgumentError
 
@@ -88,19 +87,12 @@ def flow_enabled(flow_option: Any, shape: tuple[int, int]) -> bool:
 
 def flow_axis_for(flow_axis: Any, axis: Any) -> int:
     """The flow axis (0 or 1): ``flow_axis`` if given, else the sweep's percolation ``axis``
-    when that is 0 or 1, else 0."""
+    when that is 0 or 1, else 0 (checks: :func:`leakpath._validate.flow_axis` and
+    :func:`leakpath._validate.axis`)."""
     if flow_axis is None:
-        return int(axis) if axis in (0, 1) and not isinstance(axis, str) else 0
-    if (
-        isinstance(flow_axis, (bool, np.bool_))
-        or not isinstance(flow_axis, numbers.Integral)
-        or int(flow_axis) not in (0, 1)
-    ):
-        raise InvalidArgumentError(
-            f"flow_axis: must be 0 or 1 (the leak flows along one axis), got {flow_axis!r}",
-            argument="flow_axis",
-        )
-    return int(flow_axis)
+        canonical = _validate.axis(axis)
+        return canonical if isinstance(canonical, int) else 0
+    return _validate.flow_axis(flow_axis, "flow_axis")
 
 
 #: Flows queued or running at most before :meth:`LevelFlows.submit` computes one itself:

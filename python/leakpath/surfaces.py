@@ -5,7 +5,22 @@ Conventions
 ``heights[i, j]`` is a 2-D float64 array: axis 0 = rows = y, axis 1 = columns = x, uniform
 spacing ``dx`` in both directions (square pixels). Each grid point is the centre of a
 ``dx × dx`` element, so a ``(ny, nx)`` surface covers ``ny·dx × nx·dx`` and has nominal area
-``A0 = ny·nx·dx²``. Units are the user's own; nothing assumes micrometres.
+``A0 = ny·nx·dx²``.
+
+Units
+-----
+Lengths and heights share one length unit, :attr:`Surface.unit` (a name such as ``"µm"``
+or ``"m"``, kept in ``metadata["unit"]``); areas are in ``unit²``, volumes in ``unit³``.
+The default is :data:`DEFAULT_UNIT` (micrometres): the generators make surfaces in µm
+(a 500 µm square with heights of about 1 µm), files without a unit are read as µm unless
+``load(..., unit=...)`` says otherwise. The unit only names the numbers (tables, metadata,
+figure labels); leakpath never converts them.
+
+Slopes
+------
+Contact and flow use the small-slope (half-space, lubrication) model, which is accurate to
+about ``h'_rms²/2``; :func:`check_slope` warns with :class:`leakpath.errors.SlopeWarning`
+above :data:`MAX_RMS_SLOPE` (``docs/conventions.md``).
 
 Generators (:func:`leakpath.rmd`, :func:`leakpath.spectral`) live in
 :mod:`leakpath.generators`; the file readers behind :func:`load` in ``leakpath._readers``.
@@ -21,9 +36,12 @@ from __future__ import annotations
 
 import io
 import json
+import math
 import os
+import sys
+import warnings
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import InitVar, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -42,10 +60,78 @@ from ._readers import (
     _resolve_dx,
     memory_error,
 )
-from .errors import InvalidArgumentError, LeakpathError, ProblemTooLargeError
+from .errors import InvalidArgumentError, LeakpathError, ProblemTooLargeError, SlopeWarning
 from .moments import Moments, nayak_moments
 
-__all__ = ["Surface", "load", "FILL_METHODS", "TEXT_SUFFIXES"]
+__all__ = [
+    "Surface",
+    "load",
+    "check_slope",
+    "DEFAULT_UNIT",
+    "MAX_RMS_SLOPE",
+    "FILL_METHODS",
+    "TEXT_SUFFIXES",
+]
+
+#: Length unit of a surface that names none: the micrometre.
+DEFAULT_UNIT = "µm"
+
+#: Largest rms slope ``h'_rms = √(2 m2)`` the small-slope model is trusted for without a
+#: warning: it replaces the surface normal by the vertical and the surface by its
+#: projection, errors of order ``1 − cos θ ≈ θ²/2``: 4.5 % at 0.3 (docs/conventions.md).
+MAX_RMS_SLOPE = 0.3
+
+
+def check_unit(value: Any, name: str = "unit") -> str:
+    """A length unit's name: a non-empty string of at most 32 printable characters."""
+    if not isinstance(value, str) or not value.strip() or len(value) > 32:
+        raise InvalidArgumentError(
+            f"{name}: must be the name of a length unit such as 'µm' or 'm' (a non-empty "
+            f"string of at most 32 characters), got {_validate.describe(value)}",
+            argument=name,
+        )
+    if not value.isprintable():
+        raise InvalidArgumentError(
+            f"{name}: must be printable (no newlines or control characters), got {value!r}",
+            argument=name,
+        )
+    return value.strip()
+
+
+def check_slope(surface: Surface, *, stacklevel: int = 2) -> float:
+    """The surface's rms slope ``h'_rms``; warns (:class:`leakpath.errors.SlopeWarning`),
+    once per surface, when it exceeds :data:`MAX_RMS_SLOPE`, the small-slope model's limit.
+    """
+    slope = surface.rms_slope
+    if slope > MAX_RMS_SLOPE and not surface.__dict__.get("_slope_warned"):
+        surface.__dict__["_slope_warned"] = True
+        warnings.warn(
+            f"surface: rms slope {slope:.3g} exceeds {MAX_RMS_SLOPE:g}, where the small-slope "
+            f"(half-space) contact and lubrication models stop being accurate (errors of "
+            "order slope²/2); check the units of dx and "
+            f"the heights (both in {surface.unit}), or use a coarser grid or a longer "
+            "lateral size",
+            SlopeWarning,
+            stacklevel=max(stacklevel + 1, _caller_level()),
+        )
+    return slope
+
+
+_PACKAGE_DIR = os.path.dirname(os.path.abspath(__file__))
+
+
+def _caller_level() -> int:
+    """``stacklevel`` of the first frame outside the leakpath package, seen from
+    :func:`warnings.warn` called in this module's caller (a warning points at user code,
+    not at the sweep or generator that raised it)."""
+    frame = sys._getframe(2)  # the caller of check_slope
+    level = 2
+    while frame is not None and os.path.abspath(frame.f_code.co_filename).startswith(
+        _PACKAGE_DIR + os.sep
+    ):
+        frame = frame.f_back
+        level += 1
+    return level
 
 FloatArray = npt.NDArray[np.float64]
 PathLike = str | os.PathLike[str]
@@ -103,9 +189,13 @@ class Surface:
         float64 array (converted if needed). At least one point per axis; every value finite.
         (Nayak's moments need at least 3 points per axis.)
     dx : float
-        Grid spacing (same in x and y), in the user's length unit; positive and finite.
+        Grid spacing (same in x and y), in ``unit``; positive and finite.
     metadata : dict, optional
         Free-form, JSON-serialisable description (generator, parameters, source file, …).
+    unit : str, optional
+        Length unit of ``dx`` and the heights (``"µm"``, ``"m"``, …), kept in
+        ``metadata["unit"]``. Default: ``metadata["unit"]`` when present, else
+        :data:`DEFAULT_UNIT` (``"µm"``).
 
     Raises
     ------
@@ -117,8 +207,9 @@ class Surface:
     heights: FloatArray
     dx: float
     metadata: dict[str, Any] = field(default_factory=dict)
+    unit: InitVar[str | None] = None
 
-    def __post_init__(self) -> None:
+    def __post_init__(self, unit: str | None) -> None:
         if isinstance(self.heights, _Owned):
             arr = self.heights.array  # built by leakpath itself: no copy needed
             if arr.ndim != 2 or arr.dtype != np.float64 or not arr.flags.c_contiguous:
@@ -150,6 +241,9 @@ class Surface:
                 f"metadata: must be a dict, got {type(self.metadata).__name__}"
             )
         self.metadata = dict(self.metadata)
+        if unit is None:
+            unit = self.metadata.get("unit", self.metadata.get("length_unit", DEFAULT_UNIT))
+        self.metadata["unit"] = check_unit(unit)
         self.__dict__["_checked"] = True
 
     def __setattr__(self, name: str, value: Any) -> None:
@@ -166,7 +260,7 @@ class Surface:
     def __repr__(self) -> str:
         gen = self.metadata.get("generator", self.metadata.get("source"))
         extra = f", generator={gen!r}" if gen is not None else ""
-        return f"Surface(shape={self.shape}, dx={self.dx!r}{extra})"
+        return f"Surface(shape={self.shape}, dx={self.dx!r}, unit={self.unit!r}{extra})"
 
     # ------------------------------------------------------------------ properties
     @property
@@ -176,30 +270,49 @@ class Surface:
         return int(ny), int(nx)
 
     @property
+    def rms_slope(self) -> float:
+        """Root-mean-square slope ``h'_rms = √(⟨h_x²⟩ + ⟨h_y²⟩) = √(2 m2)`` with forward
+        differences (dimensionless; :func:`leakpath.moments.rms_slope` to round-off), summed
+        over blocks of rows so that it needs a few MiB whatever the grid. 0 for a surface
+        with one point along both axes (an axis with one point has no differences)."""
+        h = self.heights
+        ny, nx = h.shape
+        rows = max(1, (1 << 20) // max(nx, 1))  # ~8 MiB of differences per block
+        sx = sy = 0.0
+        for i in range(0, ny, rows):
+            d = np.diff(h[i : i + rows], axis=1)
+            sx += float(np.einsum("ij,ij->", d, d))
+            d = np.diff(h[i : min(i + rows + 1, ny)], axis=0)
+            sy += float(np.einsum("ij,ij->", d, d))
+        mx = sx / (ny * (nx - 1)) if nx > 1 else 0.0
+        my = sy / ((ny - 1) * nx) if ny > 1 else 0.0
+        return math.sqrt(mx + my) / self.dx
+
+    @property
     def length(self) -> tuple[float, float]:
-        """Physical size ``(Ly, Lx) = (ny·dx, nx·dx)`` [length], in array-axis order."""
+        """Physical size ``(Ly, Lx) = (ny·dx, nx·dx)`` [unit], in array-axis order."""
         ny, nx = self.shape
         return ny * self.dx, nx * self.dx
 
     @property
     def nominal_area(self) -> float:
-        """Nominal area ``A0 = ny·nx·dx²`` [length²] (each point is a ``dx × dx`` element)."""
+        """Nominal area ``A0 = ny·nx·dx²`` [unit²] (each point is a ``dx × dx`` element)."""
         ny, nx = self.shape
         return ny * nx * self.dx * self.dx
 
     @property
     def height_range(self) -> float:
-        """Peak-to-valley height ``h_s = max h − min h`` [length]."""
+        """Peak-to-valley height ``h_s = max h − min h`` [unit]."""
         return float(np.max(self.heights) - np.min(self.heights))
 
     @property
     def mean_height(self) -> float:
-        """Mean height ``h̄`` [length]."""
+        """Mean height ``h̄`` [unit]."""
         return float(np.mean(self.heights))
 
     @property
     def rms_height(self) -> float:
-        """Root-mean-square height about the mean, ``√(mean((h − h̄)²)) = √m0`` [length]."""
+        """Root-mean-square height about the mean, ``√(mean((h − h̄)²)) = √m0`` [unit]."""
         d = self.heights - self.mean_height
         return float(np.sqrt(np.mean(d * d)))
 
@@ -261,13 +374,35 @@ class Surface:
         return atomic_write_bytes(target, buf.getvalue(), overwrite=overwrite)
 
     @classmethod
-    def load(cls, path: PathLike, dx: float | None = None, fill: str | None = None) -> Surface:
+    def load(
+        cls,
+        path: PathLike,
+        dx: float | None = None,
+        fill: str | None = None,
+        unit: str | None = None,
+    ) -> Surface:
         """Read a surface from ``path``; see :func:`leakpath.surfaces.load`."""
-        return load(path, dx=dx, fill=fill)
+        return load(path, dx=dx, fill=fill, unit=unit)
+
+
+def _get_unit(self: Surface) -> str:
+    return str(self.metadata.get("unit", DEFAULT_UNIT))
+
+
+def _set_unit(self: Surface, value: str) -> None:
+    self.metadata["unit"] = check_unit(value)
+
+
+# The unit lives in the metadata (saved with it); the attribute reads and checks it.
+Surface.unit = property(  # type: ignore[assignment,method-assign]
+    _get_unit, _set_unit, doc="Length unit of ``dx`` and the heights (``metadata['unit']``)."
+)
 
 
 # ---------------------------------------------------------------------------- loading
-def load(path: PathLike, *, dx: float | None = None, fill: str | None = None) -> Surface:
+def load(
+    path: PathLike, *, dx: float | None = None, fill: str | None = None, unit: str | None = None
+) -> Surface:
     """Read a surface from a file.
 
     ===================================  =====================================================
@@ -302,7 +437,7 @@ def load(path: PathLike, *, dx: float | None = None, fill: str | None = None) ->
     path : str or os.PathLike
         A regular file (a FIFO or device is refused, never waited on).
     dx : float, optional
-        Grid spacing [length]. Required when the file does not store it; when it does, a
+        Grid spacing [unit]. Required when the file does not store it; when it does, a
         different ``dx`` is an error (build ``Surface(s.heights, new_dx)`` to rescale).
     fill : {"nearest", "mean"}, optional
         What to do with undefined points (NaN, infinite, masked by the instrument, or grid
@@ -311,6 +446,10 @@ def load(path: PathLike, *, dx: float | None = None, fill: str | None = None) ->
         the mean of its nearest defined points in grid steps, filled layer by layer from the
         defined region inwards. ``"mean"``: the mean defined height. The count and method
         are recorded in ``metadata["filled"]``.
+    unit : str, optional
+        Length unit of the file's heights and spacing. Default: the unit the file records
+        (a saved surface, SurfaceTopography's formats), else :data:`DEFAULT_UNIT` (µm). A
+        unit different from the file's own is an error.
 
     Returns
     -------
@@ -334,16 +473,19 @@ def load(path: PathLike, *, dx: float | None = None, fill: str | None = None) ->
     """
     dx_arg = None if dx is None else _validate.spacing("dx", dx)
     method = None if fill is None else _validate.choice("fill", fill, FILL_METHODS)
+    unit_arg = None if unit is None else check_unit(unit)
     p, info = _check_path(path)
     try:
-        return _load_checked(p, info.st_size, dx_arg, method)
+        return _load_checked(p, info.st_size, dx_arg, method, unit_arg)
     except ProblemTooLargeError:
         raise
     except MemoryError:  # the estimate fitted, the allocation did not
         raise memory_error(p, info.st_size) from None
 
 
-def _load_checked(p: Path, size: int, dx_arg: float | None, method: str | None) -> Surface:
+def _load_checked(
+    p: Path, size: int, dx_arg: float | None, method: str | None, unit_arg: str | None = None
+) -> Surface:
     """:func:`load` of a checked path and arguments."""
     try:
         raw = _read_any(p, size, dx_arg)
@@ -379,6 +521,15 @@ def _load_checked(p: Path, size: int, dx_arg: float | None, method: str | None) 
             )
         _fill_undefined(heights, method)
         metadata["filled"] = {"method": method, "points": undefined}
+    if unit_arg is not None:
+        stored = metadata.get("unit", metadata.get("length_unit"))
+        if stored is not None and str(stored) != unit_arg:
+            raise InvalidArgumentError(
+                f"unit: {unit_arg!r} differs from the file's own unit {str(stored)!r}; omit "
+                "unit, or convert the heights and dx yourself",
+                argument="unit",
+            )
+        metadata["unit"] = unit_arg
     surface = Surface(_Owned(heights), _resolve_dx(p, raw.dx_file, dx_arg), metadata)
     surface.metadata.setdefault("source", str(p))
     return surface

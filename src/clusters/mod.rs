@@ -188,6 +188,20 @@ pub struct ContactMask<'a>(pub &'a [bool]);
 /// Free where the gap is positive (NaN is not positive; callers reject NaN gaps).
 pub struct PositiveGap<'a>(pub &'a [f64]);
 
+/// The one definition of an *open* cell, shared by the percolation classes and the flow: not
+/// in contact and a positive gap (NaN is not positive). A free cell whose gap a solve left at
+/// or below 0 conducts nothing, so it is closed.
+#[inline(always)]
+pub fn is_open(gap: f64, contact: bool) -> bool {
+    !contact && gap > 0.0
+}
+
+/// The open cells ([`is_open`]) of a gap field and an optional contact mask (same length).
+pub struct OpenCells<'a> {
+    pub gap: &'a [f64],
+    pub contact: Option<&'a [bool]>,
+}
+
 #[inline(always)]
 fn low_mask(len: usize) -> u64 {
     if len >= 64 {
@@ -247,6 +261,30 @@ impl FreeCells for PositiveGap<'_> {
         let mut bits = 0u64;
         for (k, &g) in self.0[start..start + len].iter().enumerate() {
             bits |= ((g > 0.0) as u64) << k;
+        }
+        bits
+    }
+}
+
+impl FreeCells for OpenCells<'_> {
+    fn len(&self) -> usize {
+        self.gap.len()
+    }
+    #[inline(always)]
+    fn pack(&self, start: usize, len: usize) -> u64 {
+        let gaps = &self.gap[start..start + len];
+        let mut bits = 0u64;
+        match self.contact {
+            Some(c) => {
+                for (k, (&g, &c)) in gaps.iter().zip(&c[start..start + len]).enumerate() {
+                    bits |= (is_open(g, c) as u64) << k;
+                }
+            }
+            None => {
+                for (k, &g) in gaps.iter().enumerate() {
+                    bits |= (is_open(g, false) as u64) << k;
+                }
+            }
         }
         bits
     }
@@ -745,6 +783,41 @@ mod tests {
         let gap = vec![1.0; ny * nx];
         let (_, c) = analyze(&FreeMask(&free), &gap, ny, nx, 1.0, conn, per).unwrap();
         classify(&c, flow).unwrap().classes
+    }
+
+    #[test]
+    fn open_cells_are_free_cells_with_a_positive_gap() {
+        let (ny, nx) = (37, 131);
+        let contact = random_mask(ny, nx, 0.3, 5);
+        let mut rng = Rng(77);
+        // Positive, zero, negative and NaN gaps.
+        let gap: Vec<f64> = (0..ny * nx)
+            .map(|k| match k % 7 {
+                0 => 0.0,
+                1 => -1e-12,
+                2 => f64::NAN,
+                _ => rng.unit() + 1e-300,
+            })
+            .collect();
+        for contact in [Some(&contact[..]), None] {
+            let open = OpenCells { gap: &gap, contact };
+            let want: Vec<bool> = (0..ny * nx)
+                .map(|k| is_open(gap[k], contact.is_some_and(|c| c[k])))
+                .collect();
+            assert!(want.iter().any(|&o| o) && want.iter().any(|&o| !o));
+            for start in (0..ny * nx).step_by(64) {
+                let len = (ny * nx - start).min(64);
+                let bits = open.pack(start, len);
+                for k in 0..len {
+                    assert_eq!(bits >> k & 1 == 1, want[start + k], "cell {}", start + k);
+                }
+            }
+            let per = Periodic::default();
+            let mut a = vec![0u32; ny * nx];
+            let na = label_into(&open, ny, nx, Connectivity::Four, per, &mut a).unwrap();
+            let (b, nb) = label(&want, ny, nx, Connectivity::Four, per).unwrap();
+            assert_eq!((a, na), (b, nb));
+        }
     }
 
     #[test]

@@ -242,10 +242,7 @@ fn validate(pr: &Problem<'_>, opts: &Options<'_>) -> Result<()> {
 
 #[inline(always)]
 fn closed(pr: &Problem<'_>, k: usize) -> bool {
-    match pr.contact {
-        Some(c) => c[k],
-        None => pr.gap[k] <= 0.0,
-    }
+    !clusters::is_open(pr.gap[k], pr.contact.is_some_and(|c| c[k]))
 }
 
 fn transpose<T: Copy + Send + Sync>(a: &[T], ny: usize, nx: usize) -> Vec<T> {
@@ -264,7 +261,28 @@ fn transpose<T: Copy + Send + Sync>(a: &[T], ny: usize, nx: usize) -> Vec<T> {
 
 /// Solves the Reynolds flow (module docs).
 pub fn solve(pr: &Problem<'_>, opts: &Options<'_>) -> Result<Solution> {
+    solve_labelled(pr, opts, None)
+}
+
+/// [`solve`] with the open cells already labelled (row-major, the caller's orientation):
+/// `labels` from [`clusters::label`] of the open cells ([`clusters::is_open`]) with
+/// 4-connectivity, no wrap along the flow axis and wrap across it when `pr.periodic`, and
+/// the number of clusters. The solve then does not label again. Labels whose non-zero
+/// cells are not exactly the open cells are refused (`labels`).
+pub fn solve_labelled(
+    pr: &Problem<'_>,
+    opts: &Options<'_>,
+    labels: Option<(&[u32], usize)>,
+) -> Result<Solution> {
     validate(pr, opts)?;
+    if let Some((l, k)) = labels {
+        if l.len() != pr.ny * pr.nx || l.par_iter().any(|&v| v as usize > k) {
+            return Err(Error::invalid(
+                "labels",
+                format!("must be 0..={k} on the gap's {} × {} grid", pr.ny, pr.nx),
+            ));
+        }
+    }
     let cells = pr.ny * pr.nx;
     if let Some(limit) = opts.memory_limit {
         // `Auto` needs the multigrid's memory at least; the factor is checked exactly
@@ -297,7 +315,15 @@ pub fn solve(pr: &Problem<'_>, opts: &Options<'_>) -> Result<Solution> {
     } else {
         transpose(&open_gap, pr.ny, pr.nx)
     };
-    let unit = solve_axis0(&open_gap, ny, nx, pr.periodic, opts)?;
+    let given = labels.map(|(l, k)| {
+        let l = if pr.axis == 0 {
+            l.to_vec()
+        } else {
+            transpose(l, pr.ny, pr.nx)
+        };
+        (l, k)
+    });
+    let unit = solve_axis0(&open_gap, ny, nx, pr.periodic, opts, given)?;
     drop(open_gap);
 
     // Dimensional scale: c = ĉ g_ref³ / (12 η), p = Δp φ, each factor kept as mantissa and
@@ -515,6 +541,7 @@ fn solve_axis0(
     nx: usize,
     periodic: bool,
     opts: &Options<'_>,
+    given: Option<(Vec<u32>, usize)>,
 ) -> Result<UnitSolution> {
     let n = ny * nx;
     let gref = g.par_iter().cloned().reduce(|| 0.0, f64::max);
@@ -533,7 +560,22 @@ fn solve_axis0(
         axis0: false,
         axis1: periodic,
     };
-    let (labels, k) = clusters::label(&open, ny, nx, Connectivity::Four, per)?;
+    let (labels, k) = match given {
+        Some((labels, k)) => {
+            if labels
+                .par_iter()
+                .zip(open.par_iter())
+                .any(|(&l, &o)| (l != 0) != o)
+            {
+                return Err(Error::invalid(
+                    "labels",
+                    "do not label exactly the open cells of this gap (free and g > 0)",
+                ));
+            }
+            (labels, k)
+        }
+        None => clusters::label(&open, ny, nx, Connectivity::Four, per)?,
+    };
     drop(open);
     // Touch flags per cluster: 1 inlet row, 2 outlet row.
     let mut touch = vec![0u8; k + 1];

@@ -1,20 +1,71 @@
 //! Bindings of the leak rate: steady Reynolds flow through the gap (core: flow/).
 
-use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray2, PyUntypedArrayMethods};
+use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray2, PyUntypedArrayMethods};
+use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
-use pyo3::types::PyDict;
 
+use super::clusters::{Axis, Labelling};
 use super::pools::{check_threads, pool_for, run_solve};
 use super::{row_major, to_py};
+use crate::clusters::Flow;
 use crate::error::Error;
 use crate::flow::{self, Options, Problem};
 
-/// Steady Reynolds flow through the gap; flow along `axis`, inlet at `pressure_drop`,
-/// outlet at 0. Returns a dict (see `_core.pyi`).
+/// The flow through a gap (`_core.pyi`): fields as numpy arrays, integrals as floats.
+#[pyclass(frozen, module = "leakpath._core", name = "FlowSolution")]
+pub(super) struct FlowSolution {
+    #[pyo3(get)]
+    pressure: Py<PyArray2<f64>>,
+    #[pyo3(get)]
+    flux_axis0: Py<PyArray2<f64>>,
+    #[pyo3(get)]
+    flux_axis1: Py<PyArray2<f64>>,
+    #[pyo3(get)]
+    flow_rate: f64,
+    #[pyo3(get)]
+    inlet_flow_rate: f64,
+    #[pyo3(get)]
+    conductance: f64,
+    #[pyo3(get)]
+    permeability: f64,
+    #[pyo3(get)]
+    residual: f64,
+    #[pyo3(get)]
+    conservation: f64,
+    #[pyo3(get)]
+    iterations: usize,
+    #[pyo3(get)]
+    n_unknowns: usize,
+    #[pyo3(get)]
+    levels: usize,
+    #[pyo3(get)]
+    solver: &'static str,
+    #[pyo3(get)]
+    seconds: f64,
+    /// Whether the solve labelled the open cells itself (false: a given labelling was used).
+    #[pyo3(get)]
+    labelled: bool,
+}
+
+#[pymethods]
+impl FlowSolution {
+    fn __repr__(&self) -> String {
+        format!(
+            "FlowSolution(flow_rate={:e}, permeability={:e}, solver={:?}, n_unknowns={})",
+            self.flow_rate, self.permeability, self.solver, self.n_unknowns
+        )
+    }
+}
+
+/// Steady Reynolds flow through the gap; flow along `axis` (0 or 1), inlet at
+/// `pressure_drop`, outlet at 0. `labels`: a [`Labelling`] of this gap's open cells made
+/// with 4-connectivity and the flow's wrap, reused instead of labelling again. Returns a
+/// [`FlowSolution`].
 #[pyfunction]
 #[pyo3(signature = (
-    gap, dx, contact=None, axis=0, viscosity=1.0, pressure_drop=1.0, periodic=false,
-    tol=flow::DEFAULT_TOL, max_iter=None, memory_limit=None, solver="auto", threads=None
+    gap, dx, contact=None, axis=Axis(Flow::Axis0), viscosity=1.0, pressure_drop=1.0,
+    periodic=false, tol=flow::DEFAULT_TOL, max_iter=None, memory_limit=None, solver="auto",
+    threads=None, labels=None
 ))]
 #[allow(clippy::too_many_arguments)]
 pub(super) fn solve_reynolds_flow<'py>(
@@ -22,7 +73,7 @@ pub(super) fn solve_reynolds_flow<'py>(
     gap: PyReadonlyArray2<'py, f64>,
     dx: f64,
     contact: Option<PyReadonlyArray2<'py, bool>>,
-    axis: usize,
+    axis: Axis,
     viscosity: f64,
     pressure_drop: f64,
     periodic: bool,
@@ -31,7 +82,17 @@ pub(super) fn solve_reynolds_flow<'py>(
     memory_limit: Option<u64>,
     solver: &str,
     threads: Option<i64>,
-) -> PyResult<Bound<'py, PyDict>> {
+    labels: Option<PyRef<'py, Labelling>>,
+) -> PyResult<FlowSolution> {
+    let axis = match axis.0 {
+        Flow::Axis0 => 0,
+        Flow::Axis1 => 1,
+        Flow::Either | Flow::Both => {
+            return Err(PyValueError::new_err(
+                "axis: the leak flows along one axis, 0 or 1",
+            ))
+        }
+    };
     let solver = flow::Solver::parse(solver).map_err(to_py)?;
     let pool = pool_for(check_threads(threads)?)?;
     let [ny, nx] = [gap.shape()[0], gap.shape()[1]];
@@ -63,6 +124,26 @@ pub(super) fn solve_reynolds_flow<'py>(
         pressure_drop,
         periodic,
     };
+    if let Some(l) = &labels {
+        if !l.for_flow(axis, periodic) {
+            return Err(PyValueError::new_err(
+                "labels: the flow needs a labelling with connectivity 4, no wrap along the \
+                 flow axis and wrap across it exactly when periodic",
+            ));
+        }
+        if l.labels(py).shape() != gap.shape() {
+            return Err(PyValueError::new_err(format!(
+                "labels: must have the gap's shape {:?}, got {:?}",
+                gap.shape(),
+                l.labels(py).shape()
+            )));
+        }
+    }
+    let lab = labels.as_ref().map(|l| l.labels(py).readonly());
+    let lab_slice = match &lab {
+        Some(a) => Some((a.as_slice()?, labels.as_ref().map_or(0, |l| l.n_clusters()))),
+        None => None,
+    };
     let start = std::time::Instant::now();
     let sol = py
         .detach(|| {
@@ -74,33 +155,33 @@ pub(super) fn solve_reynolds_flow<'py>(
                 memory_limit,
                 should_stop: Some(&stop),
             };
-            run_solve(&pool, ny * nx, || flow::solve(&problem, &opts))
+            run_solve(&pool, ny * nx, || {
+                flow::solve_labelled(&problem, &opts, lab_slice)
+            })
         })
         .map_err(to_py)?;
     let seconds = start.elapsed().as_secs_f64();
-    let d = PyDict::new(py);
-    d.set_item(
-        "pressure",
-        PyArray1::from_vec(py, sol.pressure).reshape([ny, nx])?,
-    )?;
-    d.set_item(
-        "flux_axis0",
-        PyArray1::from_vec(py, sol.flux_axis0).reshape([ny + 1, nx])?,
-    )?;
-    d.set_item(
-        "flux_axis1",
-        PyArray1::from_vec(py, sol.flux_axis1).reshape([ny, nx + 1])?,
-    )?;
-    d.set_item("flow_rate", sol.flow_rate)?;
-    d.set_item("inlet_flow_rate", sol.inlet_flow_rate)?;
-    d.set_item("conductance", sol.conductance)?;
-    d.set_item("permeability", sol.permeability)?;
-    d.set_item("residual", sol.residual)?;
-    d.set_item("conservation", sol.conservation)?;
-    d.set_item("iterations", sol.iterations)?;
-    d.set_item("n_unknowns", sol.n_unknowns)?;
-    d.set_item("levels", sol.levels)?;
-    d.set_item("solver", sol.solver)?;
-    d.set_item("seconds", seconds)?;
-    Ok(d)
+    Ok(FlowSolution {
+        pressure: PyArray1::from_vec(py, sol.pressure)
+            .reshape([ny, nx])?
+            .unbind(),
+        flux_axis0: PyArray1::from_vec(py, sol.flux_axis0)
+            .reshape([ny + 1, nx])?
+            .unbind(),
+        flux_axis1: PyArray1::from_vec(py, sol.flux_axis1)
+            .reshape([ny, nx + 1])?
+            .unbind(),
+        flow_rate: sol.flow_rate,
+        inlet_flow_rate: sol.inlet_flow_rate,
+        conductance: sol.conductance,
+        permeability: sol.permeability,
+        residual: sol.residual,
+        conservation: sol.conservation,
+        iterations: sol.iterations,
+        n_unknowns: sol.n_unknowns,
+        levels: sol.levels,
+        solver: sol.solver,
+        seconds,
+        labelled: lab_slice.is_none(),
+    })
 }

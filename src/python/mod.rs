@@ -245,7 +245,11 @@ fn core_module(m: &Bound<'_, PyModule>) -> PyResult<()> {
         crate::contact::AUTO_ACTIVE_SET_MAX_POINTS,
     )?;
     m.add_function(wrap_pyfunction!(clusters::label_clusters, m)?)?;
-    m.add_function(wrap_pyfunction!(clusters::classify_clusters, m)?)?;
+    m.add_function(wrap_pyfunction!(clusters::label_open, m)?)?;
+    m.add_function(wrap_pyfunction!(clusters::classify, m)?)?;
+    m.add_class::<clusters::Labelling>()?;
+    m.add_class::<clusters::Classification>()?;
+    m.add_class::<flow::FlowSolution>()?;
     m.add_function(wrap_pyfunction!(flow::solve_reynolds_flow, m)?)?;
     m.add_function(wrap_pyfunction!(solver_threads, m)?)?;
     m.add_function(wrap_pyfunction!(dense_scratch_bytes, m)?)?;

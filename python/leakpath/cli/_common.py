@@ -85,16 +85,17 @@ def format_table(rows: Sequence[tuple[str, Any]]) -> str:
     return "\n".join(f"{name.ljust(width)}  {_fmt(value)}" for name, value in rows)
 
 
+#: (statistic, label with its unit; ``{L}`` is the surface's length unit).
 _STAT_LABELS: tuple[tuple[str, str], ...] = (
     ("shape", "shape (ny x nx)"),
-    ("dx", "dx"),
-    ("height_range", "h_s (max - min)"),
-    ("mean", "mean height"),
-    ("rms_height", "rms height"),
-    ("m0", "m0"),
-    ("m2", "m2"),
-    ("m4", "m4"),
-    ("alpha", "alpha"),
+    ("dx", "dx [{L}]"),
+    ("height_range", "h_s (max - min) [{L}]"),
+    ("mean", "mean height [{L}]"),
+    ("rms_height", "rms height [{L}]"),
+    ("m0", "m0 [{L}^2]"),
+    ("m2", "m2 [1]"),
+    ("m4", "m4 [{L}^-2]"),
+    ("alpha", "alpha [1]"),
 )
 
 
@@ -104,7 +105,9 @@ def _report(surface: Surface, out: Path, *, as_json: bool) -> None:
         payload = {"path": str(out), **stats, "metadata": surface.metadata}
         _print_json(payload)
     else:
-        rows = [("file", str(out))] + [(label, stats[key]) for key, label in _STAT_LABELS]
+        rows = [("file", str(out))] + [
+            (label.format(L=surface.unit), stats[key]) for key, label in _STAT_LABELS
+        ]
         print(format_table(rows))
 
 

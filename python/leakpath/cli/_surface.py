@@ -6,7 +6,7 @@ import argparse
 import math
 from typing import Any
 
-from ..generators import rmd, spectral
+from ..generators import DEFAULT_LENGTH, rmd, spectral
 from ._common import (
     _add_output_arguments,
     _check_out,
@@ -60,7 +60,10 @@ def _add_surface_parser(subparsers: Any) -> None:
         help="std. deviation of the corner heights (default 1/sqrt(0.09))",
     )
     r.add_argument(
-        "--length", type=float, default=1.0, help="side length; dx = length/2^m (default 1)"
+        "--length",
+        type=float,
+        default=DEFAULT_LENGTH,
+        help=f"side length in µm; dx = length/2^m (default {DEFAULT_LENGTH:g})",
     )
     _add_output_arguments(r)
     r.set_defaults(func=_cmd_surface_rmd)
@@ -77,7 +80,10 @@ def _add_surface_parser(subparsers: Any) -> None:
     s.add_argument("--hurst", type=float, required=True, help="Hurst exponent, 0 < H < 1")
     s.add_argument("--seed", type=int, required=True, help="random seed (non-negative integer)")
     s.add_argument(
-        "--length", type=float, default=1.0, help="size along x; dx = length/nx (default 1)"
+        "--length",
+        type=float,
+        default=DEFAULT_LENGTH,
+        help=f"size along x in µm; dx = length/nx (default {DEFAULT_LENGTH:g})",
     )
     scale = s.add_mutually_exclusive_group()
     scale.add_argument("--rms-height", type=float, help="rms height sqrt(m0) (default 1)")

@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from .. import _validate
 from .._core import __version__
 from .._io import atomic_write_text, machine_info
 from .._io import dumps as _dumps
@@ -55,16 +56,13 @@ THRESHOLD_COLUMNS: tuple[str, ...] = (
 
 
 def _spans(row: Mapping[str, Any], axis: Any) -> bool:
-    """Whether the free region of a sweep row spans ``axis`` (see the module docstring)."""
-    if axis == 0:
-        return int(row["n_spanning_axis0"]) > 0
-    if axis == 1:
-        return int(row["n_spanning_axis1"]) > 0
-    if axis == "either":
-        return int(row["n_spanning_axis0"]) > 0 or int(row["n_spanning_axis1"]) > 0
+    """Whether the free region of a sweep row spans ``axis`` (see the module docstring);
+    ``axis`` is read by :func:`leakpath._validate.axis`."""
+    axis = _validate.axis(axis)
     if axis == "both":  # one cluster spanning both axes: only the V_pg column knows
         return float(row["V_pg"]) > 0.0
-    raise ValueError(f"axis: must be 0, 1, 'either' or 'both', got {axis!r}")
+    spans = [int(row[f"n_spanning_axis{a}"]) > 0 for a in (0, 1)]
+    return any(spans) if axis == "either" else spans[axis]
 
 
 def threshold_from_rows(rows: Sequence[Mapping[str, Any]], axis: Any = 0) -> dict[str, Any]:

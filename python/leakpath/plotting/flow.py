@@ -146,7 +146,9 @@ def plot_flux_map(
             interpolation="nearest",
         )
         cbar = ax.figure.colorbar(im, ax=ax, shrink=0.9)
-        cbar.set_label(r"$|q|/dx$ at $\eta = \Delta p = 1$")
+        # q = c_f Δp with c = g³/(12 η): at η = Δp = 1 (one pressure unit, one pressure
+        # unit × s), |q|/dx is in length²/s.
+        cbar.set_label(rf"$|q|/dx$ [{unit}$^2$/s] at $\eta = \Delta p = 1$")
     else:
         im = None
         ax.set_xlim(0.0, nx * f.dx)

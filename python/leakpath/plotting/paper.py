@@ -70,8 +70,7 @@ _LINE = {"marker": "o", "markersize": 3.5, "linewidth": 1.2}
 
 
 def _unit(surface: Surface) -> str:
-    unit = surface.metadata.get("unit", surface.metadata.get("length_unit"))
-    return str(unit) if unit else "length units"
+    return surface.unit
 
 
 def _axis_label(result: SweepResult) -> str:
@@ -86,7 +85,7 @@ def plot_topography(surface: Surface, ax: Axes, *, cmap: str = "viridis") -> Any
 
     Axis 1 of the array is ``x`` (horizontal), axis 0 is ``y`` (vertical, row 0 at the
     bottom); both axes and the colour bar are in the surface's length unit
-    (``surface.metadata["unit"]`` when present).
+    (:attr:`leakpath.Surface.unit`).
     """
     ly, lx = surface.length
     unit = _unit(surface)

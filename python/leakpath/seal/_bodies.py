@@ -908,4 +908,4 @@ def composite_surface(
     }
     if files:
         metadata["files"] = [r.files[k] for r in (upper, lower) if r.files is not None]  # type: ignore[index]
-    return Surface(heights, dx, metadata)
+    return Surface(heights, dx, metadata, unit="m")  # SI, as every seal input
