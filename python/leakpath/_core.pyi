@@ -1,7 +1,6 @@
 """Type stubs for leakpath's compiled Rust core (``leakpath._core``)."""
 
 from typing import Literal as _Literal
-from typing import TypedDict as _TypedDict
 
 import numpy as np
 import numpy.typing as npt
