@@ -169,6 +169,7 @@ use std::time::{Duration, Instant};
 
 use rayon::prelude::*;
 
+use super::capped;
 use super::multilevel::{self, CoarseCost};
 use crate::alloc;
 use crate::elastic::kernel::{love_displacement, Kernel};
@@ -284,6 +285,10 @@ pub struct Options<'a> {
     /// Take chord steps while the contact set changes wholesale (displacement control, see
     /// the module documentation); `false` keeps every iteration a regular Polonsky–Keer step.
     pub chord_steps: bool,
+    /// Hardness `H`: cap the pressure at `p ≤ H` (elastic–perfectly-plastic contact, solved by
+    /// [`crate::contact::capped`]). `None` or `+∞`: the elastic problem, by this module's
+    /// iteration unchanged.
+    pub hardness: Option<f64>,
 }
 
 impl Default for Options<'_> {
@@ -297,6 +302,7 @@ impl Default for Options<'_> {
             precondition: true,
             coarse_start: true,
             chord_steps: true,
+            hardness: None,
         }
     }
 }
@@ -329,6 +335,8 @@ pub struct Solution {
     pub kkt: f64,
     /// Number of points with `p > 0`.
     pub contact_points: usize,
+    /// Number of points at the hardness, `p = H` (0 without a hardness).
+    pub plastic_points: usize,
     /// Total force `F = dx² Σ p`.
     pub load: f64,
     /// Mean pressure `p̄ = Σ p / N`.
@@ -380,6 +388,10 @@ pub(crate) fn solve_level(
 ) -> Result<Solution> {
     validate(problem, control, opts)?;
     let (ny, nx) = (problem.ny, problem.nx);
+    if capped::finite_hardness(opts).is_some() {
+        check_memory(problem, opts)?;
+        return capped::solve_level(problem, control, opts, levels);
+    }
     if let Some(limit) = opts.memory_limit {
         let bytes = memory::polonsky_keer(ny, nx, problem.boundary);
         if bytes > limit {
@@ -504,8 +516,36 @@ pub fn solve_with_kernel(
             ),
         ));
     }
+    if capped::finite_hardness(opts).is_some() {
+        return capped::solve_with_operator(
+            op,
+            problem,
+            control,
+            opts,
+            multilevel::MAX_COARSE_LEVELS,
+        );
+    }
     let start = coarse_start(problem, control, opts, multilevel::MAX_COARSE_LEVELS)?;
     run_from(op, table, problem, control, opts, start, Finish::Confirmed)
+}
+
+/// [`Error::TooLarge`] when [`memory::polonsky_keer`] exceeds the options' memory limit.
+fn check_memory(problem: &Problem, opts: &Options) -> Result<()> {
+    let (ny, nx) = (problem.ny, problem.nx);
+    if let Some(limit) = opts.memory_limit {
+        let bytes = memory::polonsky_keer(ny, nx, problem.boundary);
+        if bytes > limit {
+            return Err(Error::TooLarge {
+                bytes,
+                limit,
+                what: format!(
+                    "Polonsky–Keer on a {ny} × {nx} {} grid",
+                    boundary_name(problem.boundary)
+                ),
+            });
+        }
+    }
+    Ok(())
 }
 
 fn boundary_name(b: Boundary) -> &'static str {
@@ -556,6 +596,20 @@ fn validate(problem: &Problem, control: Control, opts: &Options) -> Result<()> {
             ));
         }
         _ => {}
+    }
+    if let Some(cap) = opts.hardness {
+        capped::check_hardness(cap)?;
+        if let Control::MeanPressure(m) = control {
+            if m > cap {
+                return Err(Error::invalid(
+                    "mean_pressure",
+                    format!(
+                        "{m} exceeds the hardness {cap}: a perfectly plastic surface carries \
+                         at most p̄ = hardness (every point at the hardness)"
+                    ),
+                ));
+            }
+        }
     }
     if !(opts.tol.is_finite() && opts.tol > 0.0) {
         return Err(Error::invalid(
@@ -1746,6 +1800,7 @@ fn run(
         chord_steps,
         kkt,
         contact_points: state.n_c,
+        plastic_points: 0,
         load: sum_p * problem.dx * problem.dx,
         mean_pressure: sum_p / n as f64,
         coarse: CoarseCost::default(),

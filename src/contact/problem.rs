@@ -124,6 +124,9 @@ pub struct SolveOptions<'a> {
     pub max_iter: Option<usize>,
     /// Polled between iterations; `true` → [`Error::Interrupted`].
     pub should_stop: Option<&'a (dyn Fn() -> bool + Sync)>,
+    /// Hardness `H` (pressure cap `p ≤ H`, [`crate::contact::capped`]); `None` or `+∞`: elastic.
+    /// Polonsky–Keer only ([`Solver::Auto`] resolves to it).
+    pub hardness: Option<f64>,
 }
 
 impl Default for SolveOptions<'_> {
@@ -132,6 +135,7 @@ impl Default for SolveOptions<'_> {
             tol: pk::DEFAULT_TOL,
             max_iter: None,
             should_stop: None,
+            hardness: None,
         }
     }
 }
@@ -161,6 +165,8 @@ pub struct ContactSolution {
     pub kkt: f64,
     /// Number of points with `p > 0`.
     pub contact_points: usize,
+    /// Number of points at the hardness (`p = H`; 0 without one).
+    pub plastic_points: usize,
 }
 
 /// A rough surface on an elastic half-space, solved at as many approaches or loads as needed.
@@ -310,7 +316,24 @@ impl ContactProblem {
     ) -> Result<ContactSolution> {
         let (ny, nx) = (self.op.ny, self.op.nx);
         let n = ny * nx;
-        let solver = solver.resolve(n, control)?;
+        let capped = opts.hardness.is_some_and(|h| h.is_finite());
+        let solver = if capped {
+            match solver {
+                Solver::Auto | Solver::PolonskyKeer => Solver::PolonskyKeer,
+                other => {
+                    return Err(Error::invalid(
+                        "solver",
+                        format!(
+                            "{:?} cannot cap the pressure at a hardness; use solver='auto' or \
+                             'polonsky-keer' with hardness=",
+                            other.name()
+                        ),
+                    ))
+                }
+            }
+        } else {
+            solver.resolve(n, control)?
+        };
         match start {
             Start::Pressure(p) if p.len() != n => {
                 return Err(Error::invalid(
@@ -383,6 +406,7 @@ impl ContactProblem {
             precondition: true,
             coarse_start: true,
             chord_steps: true,
+            hardness: opts.hardness,
         };
         let s = pk::solve_with_kernel(
             &self.op,
@@ -403,6 +427,7 @@ impl ContactProblem {
             coarse: s.coarse,
             kkt: s.kkt,
             contact_points: s.contact_points,
+            plastic_points: s.plastic_points,
         })
     }
 
@@ -473,6 +498,7 @@ impl ContactProblem {
             coarse: CoarseCost::default(),
             kkt: s.kkt,
             contact_points: s.contact_points,
+            plastic_points: 0,
         })
     }
 }

@@ -166,8 +166,29 @@ impl ContactProblem {
 
     /// The solver that `solver` runs on this grid under the given control (the `auto`
     /// policy).
-    #[pyo3(signature = (solver="auto", load_control=false))]
-    fn resolve_solver(&self, solver: &str, load_control: bool) -> PyResult<&'static str> {
+    #[pyo3(signature = (solver="auto", load_control=false, hardness=None))]
+    fn resolve_solver(
+        &self,
+        solver: &str,
+        load_control: bool,
+        hardness: Option<f64>,
+    ) -> PyResult<&'static str> {
+        if let Some(h) = hardness {
+            crate::contact::capped::check_hardness(h).map_err(to_py)?;
+            if h.is_finite() {
+                return match Solver::from_name(solver).map_err(to_py)? {
+                    Solver::Auto | Solver::PolonskyKeer => Ok(Solver::PolonskyKeer.name()),
+                    other => Err(to_py(Error::invalid(
+                        "solver",
+                        format!(
+                            "{:?} cannot cap the pressure at a hardness; use solver='auto' or \
+                             'polonsky-keer' with hardness=",
+                            other.name()
+                        ),
+                    ))),
+                };
+            }
+        }
         let control = if load_control {
             Control::MeanPressure(1.0)
         } else {
@@ -186,7 +207,8 @@ impl ContactProblem {
     /// `contact_set` (flat indices).
     #[pyo3(signature = (
         approach=None, mean_pressure=None, solver="auto", start="cold",
-        initial_pressure=None, contact_set=None, tol=1e-12, max_iter=None, threads=None
+        initial_pressure=None, contact_set=None, tol=1e-12, max_iter=None, threads=None,
+        hardness=None
     ))]
     #[allow(clippy::too_many_arguments)]
     fn solve<'py>(
@@ -201,8 +223,12 @@ impl ContactProblem {
         tol: f64,
         max_iter: Option<usize>,
         threads: Option<i64>,
+        hardness: Option<f64>,
     ) -> PyResult<Bound<'py, PyDict>> {
         let pool = pool_for(check_threads(threads)?)?;
+        if let Some(h) = hardness {
+            crate::contact::capped::check_hardness(h).map_err(to_py)?;
+        }
         let control = match (approach, mean_pressure) {
             (Some(d), None) => Control::Approach(d),
             (None, Some(m)) => Control::MeanPressure(m),
@@ -288,6 +314,7 @@ impl ContactProblem {
                 tol,
                 max_iter,
                 should_stop: Some(&should_stop),
+                hardness,
             };
             let result = run_solve(&pool, n, || work.solve(control, solver, start, &opts));
             (result, work)
@@ -307,6 +334,7 @@ impl ContactProblem {
         set_coarse(&d, &sol.coarse)?;
         d.set_item("kkt", sol.kkt)?;
         d.set_item("contact_points", sol.contact_points)?;
+        d.set_item("plastic_points", sol.plastic_points)?;
         d.set_item("seconds", seconds)?;
         Ok(d)
     }
@@ -339,7 +367,7 @@ pub(crate) mod pk_py {
     #[pyo3(signature = (
         heights, dx, e_star, boundary="free", approach=None, mean_pressure=None, tol=None,
         max_iter=None, initial_pressure=None, memory_limit=None, precondition=true,
-        operator_of=None, coarse_start=true, chord_steps=true
+        operator_of=None, coarse_start=true, chord_steps=true, hardness=None
     ))]
     #[allow(clippy::too_many_arguments)]
     pub(crate) fn solve_polonsky_keer<'py>(
@@ -358,6 +386,7 @@ pub(crate) mod pk_py {
         operator_of: Option<PyRef<'py, super::ContactProblem>>,
         coarse_start: bool,
         chord_steps: bool,
+        hardness: Option<f64>,
     ) -> PyResult<Bound<'py, PyDict>> {
         let op = operator_of.as_ref().map(|cp| {
             (
@@ -452,6 +481,7 @@ pub(crate) mod pk_py {
                 precondition,
                 coarse_start,
                 chord_steps,
+                hardness,
             };
             crate::python::on_solver_pool(ny * nx, || match &op {
                 // The operator of a kept ContactProblem: no kernel or FFT set-up per solve.
@@ -484,6 +514,7 @@ pub(crate) mod pk_py {
         d.set_item("load", sol.load)?;
         d.set_item("mean_pressure", sol.mean_pressure)?;
         d.set_item("contact_points", sol.contact_points)?;
+        d.set_item("plastic_points", sol.plastic_points)?;
         d.set_item("seconds", seconds)?;
         Ok(d)
     }
