@@ -35,6 +35,8 @@ class _SolveFields(_TypedDict):
     coarse_preconditioner_fine_equivalent: float
     kkt: float
     contact_points: int
+    #: Points at the hardness (``p = H``); 0 without a hardness.
+    plastic_points: int
     seconds: float
 
 class ContactResult(_SolveFields):
@@ -117,6 +119,7 @@ def solve_polonsky_keer(
     operator_of: ContactProblem | None = None,
     coarse_start: bool = True,
     chord_steps: bool = True,
+    hardness: float | None = None,
 ) -> PolonskyKeerResult:
     """Normal contact of an elastic rough surface against a rigid flat, Polonsky–Keer CG.
 
@@ -159,6 +162,12 @@ def solve_polonsky_keer(
     ``coarse_iterations``, ``coarse_applies``, ``coarse_preconditioner_applies`` (raw, each
     on its own grid), ``coarse_applies_fine_equivalent``,
     ``coarse_preconditioner_fine_equivalent`` (``Σ count · N_level / N``).
+
+    ``hardness``: cap the pressure at ``p ≤ H`` (elastic–perfectly-plastic contact,
+    ``docs/plasticity.md``): points at ``p = H`` may have ``g < 0`` (plastic
+    interpenetration), ``plastic_points`` counts them. The preconditioner and chord steps are
+    not used then (``precondition``/``chord_steps`` are ignored); the coarse start is kept.
+    Load control requires ``mean_pressure ≤ hardness``. ``None``/``inf``: the elastic solve.
     """
 
 class ContactProblem:
@@ -182,8 +191,11 @@ class ContactProblem:
         """Displacement ``u = C p`` by FFT, shape ``(ny, nx)``."""
     def block(self, indices: npt.NDArray[np.int64]) -> npt.NDArray[np.float64]:
         """Dense block ``C_PP`` for flat indices (free-boundary Love coefficients)."""
-    def resolve_solver(self, solver: str = "auto", load_control: bool = False) -> str:
-        """The solver ``solver`` runs on this grid (the ``auto`` policy)."""
+    def resolve_solver(
+        self, solver: str = "auto", load_control: bool = False, hardness: float | None = None
+    ) -> str:
+        """The solver ``solver`` runs on this grid (the ``auto`` policy; with a finite
+        ``hardness`` always Polonsky–Keer, the exact solvers are refused)."""
     def solve(
         self,
         approach: float | None = None,
@@ -195,6 +207,7 @@ class ContactProblem:
         tol: float = 1e-12,
         max_iter: int | None = None,
         threads: int | None = None,
+        hardness: float | None = None,
     ) -> ContactResult:
         """Solve at ``approach`` or at ``mean_pressure`` (exactly one; the exact solvers take
         the approach only). ``start``: ``"cold"`` (p = 0), ``"previous"`` (this problem's
@@ -205,7 +218,9 @@ class ContactProblem:
         :data:`AUTO_ACTIVE_SET_MAX_POINTS` points in displacement control, Polonsky–Keer
         otherwise; ``solver`` in the result names the one that ran. ``threads``: run on a
         pool of that many threads (1: the calling thread's own one-thread pool; default: the
-        solver pool); the result does not depend on it."""
+        solver pool); the result does not depend on it. ``hardness``: cap the pressure at
+        ``p ≤ H`` (elastic–perfectly-plastic; Polonsky–Keer only, ``"auto"`` resolves to it;
+        ``None``/``inf``: the elastic solve, bit for bit)."""
 
 # ---- clusters ----
 def label_clusters(

@@ -13,6 +13,12 @@ Any approach ``Δ ≥ 0`` is allowed (about half a rough patch is in contact at 
 ``boundary="periodic"``: the surface repeats and ``u`` has zero mean; full contact is reached
 at ``Δ = max h − mean h`` and a larger approach is an error. The conventions are written out
 in ``docs/conventions.md``.
+
+``hardness=H`` caps the contact pressure at ``p ≤ H`` (elastic–perfectly-plastic contact,
+Polonsky–Keer only): points at ``p = H`` yield, and the interpenetration ``−g`` there is kept
+as permanent plastic deformation (:attr:`ContactState.plastic_displacement`).
+:meth:`ContactProblem.unloading` solves the elastic(-capped) contact of the permanently
+deformed surface. See ``docs/plasticity.md``.
 """
 
 from __future__ import annotations
@@ -107,6 +113,13 @@ class ContactState:
     #: grids, each weighted by its grid's share of the fine points (a 2× coarser product
     #: counts ¼); 0 when there was none.
     coarse_fft_products: float = 0.0
+    #: The hardness ``H`` [pressure] the pressure was capped at (``None``: elastic).
+    hardness: float | None = None
+    #: Permanent plastic displacement ``w_p ≥ 0`` [length] of the surface, relative to
+    #: ``heights``: the interpenetration ``−g`` at the points that yielded (``p = H``) in this
+    #: solve plus the deformation of the surface it was solved on (an unloading problem);
+    #: ``None``: none (zeros).
+    plastic_displacement_field: np.ndarray | None = field(default=None, repr=False)
 
     def __repr__(self) -> str:
         # One line of scalars: the fields are grids, shown by their shape only.
@@ -146,8 +159,48 @@ class ContactState:
 
     @property
     def deformed(self) -> np.ndarray:
-        """Deformed surface ``s = h − u``."""
-        return self.heights - self.displacement
+        """Deformed surface ``s = h − w_p − u`` (``w_p``: the plastic displacement, 0 for
+        elastic contact)."""
+        if self.plastic_displacement_field is None:
+            return self.heights - self.displacement
+        return self.heights - self.plastic_displacement_field - self.displacement
+
+    @property
+    def plastic_displacement(self) -> np.ndarray:
+        """Permanent plastic displacement ``w_p ≥ 0`` [length] (zeros for elastic contact):
+        ``−g`` of the elastic–plastic solution at points at the hardness, plus any deformation
+        the solved surface already had (``docs/plasticity.md``)."""
+        if self.plastic_displacement_field is None:
+            return np.zeros_like(self.pressure)
+        return self.plastic_displacement_field
+
+    @property
+    def permanent_surface(self) -> np.ndarray:
+        """The permanently deformed surface ``h − w_p`` [length]: what is left after
+        complete unloading (the elastic part recovers)."""
+        return self.heights - self.plastic_displacement
+
+    @cached_property
+    def plastic(self) -> np.ndarray:
+        """Plastically deformed points ``w_p > 0``."""
+        return self.plastic_displacement > 0
+
+    @cached_property
+    def yielding(self) -> np.ndarray:
+        """Points at the hardness in this state, ``p ≥ H`` (all False without one)."""
+        if self.hardness is None:
+            return np.zeros(self.pressure.shape, dtype=bool)
+        return self.pressure >= self.hardness
+
+    @property
+    def plastic_fraction(self) -> float:
+        """``a_pl = #(w_p > 0)/N``: area fraction deformed plastically."""
+        return float(np.count_nonzero(self.plastic) / self.n_points)
+
+    @property
+    def plastic_volume(self) -> float:
+        """``V_pl = dx² Σ w_p`` [length³]: volume displaced plastically."""
+        return float(self.plastic_displacement.sum() * self.dx**2)
 
     @property
     def load(self) -> float:
@@ -220,6 +273,15 @@ class ContactState:
             "iterations": self.iterations,
             "kkt": self.kkt,
             "seconds": self.seconds,
+            **(
+                {}
+                if self.hardness is None
+                else {
+                    "hardness": self.hardness,
+                    "plastic_fraction": self.plastic_fraction,
+                    "plastic_volume": self.plastic_volume,
+                }
+            ),
         }
 
     def flow(self, **kw: Any) -> Flow:
@@ -227,6 +289,31 @@ class ContactState:
         from ._flow import flow
 
         return flow(self, **kw)
+
+
+def check_hardness(hardness: Any) -> float | None:
+    """``hardness`` as a positive float [pressure], or ``None`` for none (``None`` or
+    ``inf``); anything else raises :class:`~leakpath.errors.InvalidArgumentError` naming it."""
+    if hardness is None:
+        return None
+    if isinstance(hardness, (bool, np.bool_)) or not isinstance(
+        hardness, (int, float, np.integer, np.floating)
+    ):
+        raise InvalidArgumentError(
+            f"hardness: expected a positive number [pressure, E's unit] or None, got "
+            f"{type(hardness).__name__} {_validate.describe(hardness, 40)}",
+            argument="hardness",
+        )
+    h = float(hardness)
+    if h == math.inf:
+        return None
+    if not (h > 0 and math.isfinite(h)):
+        raise InvalidArgumentError(
+            f"hardness: must be a positive number (or None / inf for elastic contact), got "
+            f"{hardness!r}",
+            argument="hardness",
+        )
+    return h
 
 
 def _describe_start(value: Any) -> str:
@@ -252,6 +339,10 @@ class ContactProblem:
 
     Keeps the influence kernel, the FFT operator and the Lawson–Hanson Cholesky factor between
     solves, so a sweep over increasing approaches can warm-start from the previous level.
+
+    ``hardness``: the hardness ``H`` [pressure, the unit of ``E``] of the surface: every solve
+    caps the pressure at ``p ≤ H`` (elastic–perfectly-plastic contact, Polonsky–Keer; ``None``
+    or ``inf``: elastic). See ``docs/plasticity.md``.
     """
 
     def __init__(
@@ -263,10 +354,19 @@ class ContactProblem:
         boundary: Boundary = "free",
         dx: float | None = None,
         memory_limit: int | None = None,
+        hardness: float | None = None,
     ) -> None:
         self.surface = _as_surface(surface, dx)
         self.boundary = _validate.boundary(boundary)
         self.e_star = contact_modulus(E, nu)
+        self.hardness = check_hardness(hardness)
+        #: Plastic displacement of the surface this problem solves relative to the original
+        #: one (an unloading problem, :meth:`unloading`), and the height of the original's
+        #: highest point above this surface's (the approach offset): approaches stay referenced
+        #: to the original surface's highest point.
+        self._plastic_base: np.ndarray | None = None
+        self._original: np.ndarray | None = None
+        self._approach_offset = 0.0
         _validate.contact_scales(self.e_star, self.surface.dx, self.surface.height_range)
         limit = _validate.memory_limit(memory_limit)
         self.memory_limit = default_memory_limit() if limit is None else limit
@@ -287,6 +387,41 @@ class ContactProblem:
             f"h_s={self.h_range:.6g}, max_approach={self.max_approach:.6g})"
         )
 
+    def unloading(self, state: ContactState) -> ContactProblem:
+        """The contact problem of ``state``'s permanently deformed surface ``h − w_p``, for
+        unloading (and reloading) after plastic deformation.
+
+        Same ``E*``, boundary, ``dx`` and hardness. Approaches (given and reported) stay
+        referenced to the highest point of the *original* surface: the flat sits at
+        ``max h − Δ``. Its states carry the permanent ``w_p`` of ``state`` (plus any new
+        yield), their ``heights`` are the original ones, so ``gap``, ``deformed`` and the
+        percolation and flow of the free volume are those of the deformed interface.
+        """
+        if not isinstance(state, ContactState):
+            raise InvalidArgumentError(
+                f"state: expected a ContactState, got {type(state).__name__}", argument="state"
+            )
+        original = self._original if self._original is not None else self._h
+        if state.pressure.shape != original.shape or state.dx != self.surface.dx:
+            raise InvalidArgumentError(
+                "state: not a state of this problem's surface (shape or dx differ)",
+                argument="state",
+            )
+        w = np.array(state.plastic_displacement, dtype=np.float64)
+        deformed = original - w
+        out = ContactProblem(
+            Surface(deformed, self.surface.dx),
+            E=self.e_star,
+            nu=0.0,
+            boundary=self.boundary,  # type: ignore[arg-type]
+            memory_limit=self.memory_limit,
+            hardness=self.hardness,
+        )
+        out._plastic_base = w
+        out._original = original
+        out._approach_offset = float(original.max()) - out.h_max
+        return out
+
     @property
     def max_approach(self) -> float:
         """The approach of a full sweep: ``h_s`` (free; larger approaches are allowed too) or
@@ -297,7 +432,9 @@ class ContactProblem:
 
     def _check_approach(self, approach: float) -> float:
         a = _validate.real("approach", approach, low=0.0, what="a finite number ≥ 0")
-        if self.boundary == "free":
+        if self.boundary == "free" or self.hardness is not None:
+            # A capped problem is well posed at any approach (periodic: past full contact
+            # the pressure rises to the hardness everywhere).
             # A free-boundary patch keeps gaining contact past h_s (about half of it is in
             # contact at Δ = h_s); any approach is a well-posed problem.
             return a
@@ -354,6 +491,12 @@ class ContactProblem:
         ``RAYON_NUM_THREADS``); the result does not depend on it.
         """
         _validate.choice("solver", solver, SOLVERS)
+        if self.hardness is not None and solver in ("active-set", "lawson-hanson"):
+            raise InvalidArgumentError(
+                f"solver: {solver!r} cannot cap the pressure at a hardness; use solver='auto' "
+                "or 'polonsky-keer' with hardness=",
+                argument="solver",
+            )
         threads = _validate.threads(threads)
         tol = DEFAULT_TOL if tol is None else _validate.positive("tol", tol)
         max_iter = _validate.optional_integer("max_iter", max_iter, low=1)
@@ -366,6 +509,13 @@ class ContactProblem:
         if mean_pressure is not None:
             pbar = _validate.positive("mean_pressure", mean_pressure)
             _validate.load_scales(pbar, self.e_star, self.surface.dx)
+            if self.hardness is not None and pbar > self.hardness:
+                raise InvalidArgumentError(
+                    f"mean_pressure: {pbar:.6g} exceeds the hardness {self.hardness:.6g}; a "
+                    "perfectly plastic surface carries at most p̄ = hardness (every point "
+                    "yielding); give mean_pressure ≤ hardness",
+                    argument="mean_pressure",
+                )
             if solver in ("active-set", "lawson-hanson"):
                 raise InvalidArgumentError(
                     f"solver: {solver!r} imposes the approach only; use solver='auto' or "
@@ -375,6 +525,9 @@ class ContactProblem:
             start = self._check_warm_start(warm_start, None, pbar)
             return self._solve(None, pbar, solver, start, tol, max_iter, threads)
         a = self._check_approach(approach)
+        if self._approach_offset:
+            # The approach is referenced to the original surface's highest point.
+            a = max(a - self._approach_offset, 0.0)
         start = self._check_warm_start(warm_start, a, None)
         return self._solve(a, None, solver, start, tol, max_iter, threads)
 
@@ -504,6 +657,7 @@ class ContactProblem:
             tol=tol,
             max_iter=max_iter,
             threads=threads,
+            hardness=self.hardness,
             **self._start(warm_start),
         )
         state = self._state(out, out["solver"])
@@ -511,12 +665,25 @@ class ContactProblem:
         return state
 
     def _state(self, out: dict[str, Any], solver: str) -> ContactState:
+        gap = out["gap"]
+        plastic = None
+        if self.hardness is not None:
+            # Points at the hardness have flowed: their interpenetration −g is permanent, and
+            # the flattened surface touches the flat there (gap 0).
+            yielded = out["pressure"] >= self.hardness
+            new = np.where(yielded, np.maximum(-gap, 0.0), 0.0)
+            gap = np.where(yielded, np.maximum(gap, 0.0), gap)
+            plastic = new if self._plastic_base is None else self._plastic_base + new
+        elif self._plastic_base is not None:
+            plastic = self._plastic_base
         return ContactState(
-            approach=float(out["approach"]),
+            approach=float(out["approach"]) + self._approach_offset,
             pressure=out["pressure"],
             displacement=out["displacement"],
-            gap=out["gap"],
-            heights=self._h,
+            gap=gap,
+            hardness=self.hardness,
+            plastic_displacement_field=plastic,
+            heights=self._h if self._original is None else self._original,
             dx=self.surface.dx,
             e_star=self.e_star,
             boundary=self.boundary,
@@ -544,15 +711,23 @@ def solve(
     max_iter: int | None = None,
     dx: float | None = None,
     memory_limit: int | None = None,
+    hardness: float | None = None,
 ) -> ContactState:
     """Solve the contact of ``surface`` with a rigid flat at an imposed approach, or at an
-    imposed ``mean_pressure`` (load control).
+    imposed ``mean_pressure`` (load control); ``hardness`` caps the pressure at ``p ≤ H``
+    (elastic–perfectly-plastic, ``docs/plasticity.md``).
 
     See :class:`ContactProblem` and :meth:`ContactProblem.solve`. ``warm_start=True`` has no
     previous solve to start from here; pass a :class:`ContactState` or a contact mask.
     """
     problem = ContactProblem(
-        surface, E=E, nu=nu, boundary=boundary, dx=dx, memory_limit=memory_limit
+        surface,
+        E=E,
+        nu=nu,
+        boundary=boundary,
+        dx=dx,
+        memory_limit=memory_limit,
+        hardness=hardness,
     )
     return problem.solve(
         approach,
