@@ -407,7 +407,12 @@ class ContactProblem:
                 "state: not a state of this problem's surface (shape or dx differ)",
                 argument="state",
             )
-        w = np.array(state.plastic_displacement, dtype=np.float64)
+        return self._unloading_from(np.array(state.plastic_displacement, dtype=np.float64))
+
+    def _unloading_from(self, w: np.ndarray) -> ContactProblem:
+        """:meth:`unloading` from a plastic displacement field ``w ≥ 0`` of the original
+        surface."""
+        original = self._original if self._original is not None else self._h
         deformed = original - w
         out = ContactProblem(
             Surface(deformed, self.surface.dx),
