@@ -366,7 +366,10 @@ class SweepResult:
         class map per row in ``levels_to_map`` (default
         :func:`leakpath.plotting.default_map_levels`) and, when the table has leak-rate
         columns, ``fig4_leak_rate`` and one flux map per row in ``flux_levels`` (default:
-        the last leaking row).
+        the last leaking row); for a sweep with a hardness or an unloading branch also
+        ``fig5_plastic_leak_rate`` (leak rate against nominal pressure, both branches) and
+        ``fig6_plastic_area`` (contact and plastic area fractions,
+        :mod:`leakpath.plotting.plastic`).
 
         Without ``outdir`` nothing is written: returns a dict file stem → matplotlib
         :class:`~matplotlib.figure.Figure` (``"fig1_topography_moments"``, …,
@@ -379,14 +382,17 @@ class SweepResult:
         """
         from .plotting.flow import flow_figures, save_flow_figures
         from .plotting.paper import paper_figures, save_paper_figures
+        from .plotting.plastic import plastic_figures, save_plastic_figures
 
         if outdir is None:
             return {
                 **paper_figures(self, levels_to_map=levels_to_map),
                 **flow_figures(self, flux_levels=flux_levels),
+                **plastic_figures(self),
             }
         paths = save_paper_figures(self, outdir, formats=formats, levels_to_map=levels_to_map)
-        return paths + save_flow_figures(self, outdir, formats=formats, flux_levels=flux_levels)
+        paths += save_flow_figures(self, outdir, formats=formats, flux_levels=flux_levels)
+        return paths + save_plastic_figures(self, outdir, formats=formats)
 
 
 _DEFINITIONS = {

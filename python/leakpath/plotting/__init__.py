@@ -6,6 +6,12 @@ atomically; none of them computes physics.
 """
 
 from .flow import flow_figures, flux_magnitude, level_flow, save_flow_figures
+from .plastic import (
+    figure_plastic_area,
+    figure_plastic_leak_rate,
+    plastic_figures,
+    save_plastic_figures,
+)
 from .paper import (
     CLASS_COLOURS,
     CLASS_NAMES,
@@ -28,6 +34,10 @@ from .paper import (
 )
 
 __all__ = [
+    "figure_plastic_area",
+    "figure_plastic_leak_rate",
+    "plastic_figures",
+    "save_plastic_figures",
     "CLASS_COLOURS",
     "CLASS_NAMES",
     "default_map_levels",
