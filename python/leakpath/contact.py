@@ -530,11 +530,15 @@ class ContactProblem:
             start = self._check_warm_start(warm_start, None, pbar)
             return self._solve(None, pbar, solver, start, tol, max_iter, threads)
         a = self._check_approach(approach)
+        lift = 0.0
         if self._approach_offset:
-            # The approach is referenced to the original surface's highest point.
+            # The approach is referenced to the original surface's highest point; a flat
+            # above the deformed surface's highest point touches nothing (p = 0) and stands
+            # `lift` above it.
+            lift = max(self._approach_offset - a, 0.0)
             a = max(a - self._approach_offset, 0.0)
         start = self._check_warm_start(warm_start, a, None)
-        return self._solve(a, None, solver, start, tol, max_iter, threads)
+        return self._solve(a, None, solver, start, tol, max_iter, threads, lift)
 
     #: A pressure start whose largest value exceeds this multiple of the largest pressure a
     #: solution can have (:meth:`_pressure_bound`) is refused: it says nothing about the
@@ -654,6 +658,7 @@ class ContactProblem:
         tol: float,
         max_iter: int | None,
         threads: int | None = None,
+        lift: float = 0.0,
     ) -> ContactState:
         out = self._core.solve(
             approach=a,
@@ -665,6 +670,9 @@ class ContactProblem:
             hardness=self.hardness,
             **self._start(warm_start),
         )
+        if lift > 0:
+            out["gap"] = out["gap"] + lift
+            out["approach"] = out["approach"] - lift
         state = self._state(out, out["solver"])
         self._last = state
         return state
