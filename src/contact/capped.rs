@@ -264,8 +264,17 @@ pub(crate) fn solve_with_operator(
             let (mut lo_d, mut lo_m) = (0.0f64, 0.0f64);
             let mut hi: Option<(f64, f64)> = None;
             let mut d = if hs > 0.0 { 0.5 * hs } else { pbar * c00 };
+            let mut applies0 = 0;
+            if let Some(p0) = opts.initial_pressure {
+                // A warm start also gives the approach: the mean over its free set of
+                // `max h − h + C p` (the elastic solver's load-control formula).
+                if let Some(e) = approach_of(op, problem, hmax, p0, pbar, cap) {
+                    d = e;
+                }
+                applies0 = 1;
+            }
             let (mut warm, mut cost) = start_of(Control::Approach(d))?;
-            let mut total = (0usize, 0usize);
+            let mut total = (0usize, applies0);
             let mut side = 0i32;
             for _ in 0..LOAD_MAX_SOLVES {
                 let o = Options {
@@ -300,6 +309,10 @@ pub(crate) fn solve_with_operator(
                     side = 1;
                 }
                 d = match hi {
+                    // The load grows at least linearly with Δ from P(0) = 0 (the contact
+                    // spreads), so the line through the origin overshoots the root: a
+                    // bracket in one step, at most 4× further.
+                    None if m > 0.0 => (d * target / m).min(4.0 * d),
                     None => 2.0 * d.max(f64::MIN_POSITIVE),
                     Some((hd, hm)) => {
                         let next = lo_d + (target - lo_m) * (hd - lo_d) / (hm - lo_m);
@@ -319,6 +332,49 @@ pub(crate) fn solve_with_operator(
             })
         }
     }
+}
+
+/// The approach a start pressure `p0` (rescaled to the mean `pbar`, clamped into `[0, H]`)
+/// implies: `Δ = mean_{0<p<H} (max h − h + C p)` (over `p > 0` when no point is free), or
+/// `None` when it has no contact or the value is not a positive number.
+fn approach_of(
+    op: &Operator,
+    problem: &Problem,
+    hmax: f64,
+    p0: &[f64],
+    pbar: f64,
+    cap: f64,
+) -> Option<f64> {
+    let n = p0.len();
+    let sum: f64 = p0.iter().map(|&v| v.max(0.0)).sum();
+    if !(sum > 0.0) {
+        return None;
+    }
+    let s = pbar * n as f64 / sum;
+    let p: Vec<f64> = p0.iter().map(|&v| (v.max(0.0) * s).min(cap)).collect();
+    let mut u = vec![0.0; n];
+    op.apply(&p, &mut u);
+    let h = problem.heights;
+    let (mut free, mut nf, mut all, mut na) = (0.0, 0usize, 0.0, 0usize);
+    for i in 0..n {
+        if p[i] > 0.0 {
+            let v = hmax - h[i] + u[i];
+            all += v;
+            na += 1;
+            if p[i] < cap {
+                free += v;
+                nf += 1;
+            }
+        }
+    }
+    let d = if nf > 0 {
+        free / nf as f64
+    } else if na > 0 {
+        all / na as f64
+    } else {
+        return None;
+    };
+    (d.is_finite() && d > 0.0).then_some(d)
 }
 
 /// `p ≡ H`: the mean pressure equals the hardness.

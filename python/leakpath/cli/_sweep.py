@@ -13,8 +13,8 @@ from ..errors import InvalidArgumentError
 from ..experiments import PAPER, paper_surface
 from ..surfaces import FILL_METHODS, Surface
 from ._common import (
-    _SOLVER_HELP,
     _PLASTIC_SUMMARY_COLUMNS,
+    _SOLVER_HELP,
     _SUMMARY_COLUMNS,
     CHECKPOINT_DIR,
     FIELDS_NAME,

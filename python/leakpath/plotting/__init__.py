@@ -6,12 +6,6 @@ atomically; none of them computes physics.
 """
 
 from .flow import flow_figures, flux_magnitude, level_flow, save_flow_figures
-from .plastic import (
-    figure_plastic_area,
-    figure_plastic_leak_rate,
-    plastic_figures,
-    save_plastic_figures,
-)
 from .paper import (
     CLASS_COLOURS,
     CLASS_NAMES,
@@ -31,6 +25,12 @@ from .paper import (
     remove_stale_temporaries,
     save_figure,
     save_paper_figures,
+)
+from .plastic import (
+    figure_plastic_area,
+    figure_plastic_leak_rate,
+    plastic_figures,
+    save_plastic_figures,
 )
 
 __all__ = [
