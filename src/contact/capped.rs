@@ -29,14 +29,16 @@
 //! ```
 //!
 //! A step whose pressures all follow the linear step updates the gap incrementally
-//! (`g ← g − τ r`); any truncation, cap or entry takes a fresh product `u = C p` (so the
-//! capped iteration costs one or two products per iteration). Convergence is confirmed on a
-//! fresh product.
+//! (`g ← g − τ r`); up to [`pk::sparse_limit`] truncations, caps or entries `d` add `C d` by
+//! direct summation with the influence table (the elastic solver's sparse correction); more
+//! take a fresh product `u = C p`. Convergence is confirmed on a fresh product.
 //!
-//! The elastic solver's accelerations are not used here: no preconditioner, chord steps or
-//! sparse corrections (their step rules assume one bound). The coarse-to-fine start is kept:
-//! it only supplies a start pressure, which is clamped into `[0, H]`, and the coarse levels are
-//! themselves capped solves.
+//! The elastic solver's preconditioner and chord steps are not used here (their step rules
+//! assume one bound). The coarse-to-fine start is kept: it only supplies a start pressure,
+//! which is clamped into `[0, H]`, and the coarse levels are themselves capped solves.
+//! Measured at 1025² (free, Δ = 0.3 h_s, H half the largest elastic pressure, 2 cores):
+//! 109 iterations and 141 FFT products (184 without the sparse corrections), against 41 and
+//! 45 for the elastic solve.
 //!
 //! # Load control
 //!
@@ -61,7 +63,9 @@ use std::time::Instant;
 use rayon::prelude::*;
 
 use super::multilevel::{self, CoarseCost};
-use super::polonsky_keer::{default_max_iter, Control, Options, Problem, Solution, CHUNK};
+use super::polonsky_keer::{
+    self as pk, default_max_iter, Control, Options, Problem, Solution, CHUNK,
+};
 use crate::alloc;
 use crate::elastic::kernel::{love_displacement, Kernel};
 use crate::elastic::operator::Operator;
@@ -215,19 +219,20 @@ pub(crate) fn solve_level(
         Boundary::Free => {
             let kernel = Kernel::try_new(ny, nx, problem.dx, problem.e_star)?;
             let op = Operator::try_free(&kernel)?;
-            drop(kernel);
-            solve_with_operator(&op, problem, control, opts, levels)
+            solve_with_operator(&op, Some(&kernel.table), problem, control, opts, levels)
         }
         Boundary::Periodic => {
             let op = Operator::try_periodic(ny, nx, problem.dx, problem.e_star)?;
-            solve_with_operator(&op, problem, control, opts, levels)
+            solve_with_operator(&op, None, problem, control, opts, levels)
         }
     }
 }
 
-/// The capped solve on the caller's operator (validated by the caller).
+/// The capped solve on the caller's operator (validated by the caller), with its influence
+/// table `C e_0` when at hand (built by one product on first use otherwise).
 pub(crate) fn solve_with_operator(
     op: &Operator,
+    table: Option<&[f64]>,
     problem: &Problem,
     control: Control,
     opts: &Options,
@@ -250,7 +255,7 @@ pub(crate) fn solve_with_operator(
     match control {
         Control::Approach(delta) => {
             let (p0, cost) = start_of(control)?;
-            let mut sol = run(op, problem, hmax, hs, c00, delta, cap, opts, p0)?;
+            let mut sol = run(op, table, problem, hmax, hs, c00, delta, cap, opts, p0)?;
             sol.coarse = cost;
             Ok(sol)
         }
@@ -281,7 +286,7 @@ pub(crate) fn solve_with_operator(
                     initial_pressure: None,
                     ..*opts
                 };
-                let mut sol = run(op, problem, hmax, hs, c00, d, cap, &o, warm.take())?;
+                let mut sol = run(op, table, problem, hmax, hs, c00, d, cap, &o, warm.take())?;
                 total.0 += sol.iterations;
                 total.1 += sol.applies;
                 let m = sol.mean_pressure;
@@ -444,6 +449,7 @@ fn scale(hs: f64, delta: f64, cap: f64, c00: f64) -> f64 {
 #[allow(clippy::too_many_arguments)]
 fn run(
     op: &Operator,
+    table: Option<&[f64]>,
     problem: &Problem,
     hmax: f64,
     hs: f64,
@@ -469,6 +475,10 @@ fn run(
     let mut t: Vec<f64> = alloc::try_zeroed(n, "the conjugate direction")?;
     let mut r: Vec<f64> = alloc::try_zeroed(n, "the operator work field")?;
     let mut applies = 0usize;
+    // Influence table of the sparse corrections (built on first use when not given).
+    let periodic = op.boundary == Boundary::Periodic;
+    let sparse_max = pk::sparse_limit(op.boundary);
+    let mut own_table: Vec<f64> = Vec::new();
 
     // Fresh product and gap.
     let fresh_gap = |p: &[f64], u: &mut [f64], g: &mut [f64], applies: &mut usize| -> Red {
@@ -576,15 +586,16 @@ fn run(
             }
         }
         // Steps 4–5, with the incremental gap.
-        let up = {
+        let (up, changes) = {
             let (t, r) = (&t, &r);
-            let parts: Vec<Red> = p
+            let parts: Vec<(Red, Vec<(usize, f64)>)> = p
                 .par_chunks_mut(CHUNK)
                 .zip(g.par_chunks_mut(CHUNK))
                 .enumerate()
                 .map(|(c, (pc, gc))| {
                     let lo = c * CHUNK;
                     let mut a = Red::ZERO;
+                    let mut ch = Vec::new();
                     for i in 0..pc.len() {
                         let gi = gc[i];
                         let lin = pc[i] - tau * t[lo + i];
@@ -598,21 +609,59 @@ fn run(
                         }
                         if pn != lin {
                             a.n_nl += 1;
+                            if ch.len() < sparse_max {
+                                ch.push((lo + i, pn - lin));
+                            }
                         }
                         pc[i] = pn;
                         let gn = gi - tau * r[lo + i];
                         gc[i] = gn;
                         a.observe(pn, gn, cap);
                     }
-                    a
+                    (a, ch)
                 })
                 .collect();
-            parts.iter().fold(Red::ZERO, |a, b| a.merge(b))
+            let red = parts.iter().fold(Red::ZERO, |a, b| a.merge(&b.0));
+            let mut changes = Vec::new();
+            if red.n_nl <= sparse_max {
+                for (_, ch) in &parts {
+                    changes.extend_from_slice(ch);
+                }
+            }
+            (red, changes)
         };
         it += 1;
         cg = up.n_ol + up.n_ul == 0;
         if up.n_nl == 0 {
             state = up;
+            fresh = false;
+        } else if up.n_nl <= sparse_max {
+            // A few non-linear changes d: g += C d by direct summation with the table.
+            if table.is_none() && own_table.is_empty() {
+                let mut e0 = alloc::try_zeroed(n, "a unit load")?;
+                e0[0] = 1.0;
+                own_table = alloc::try_zeroed(n, "the influence table")?;
+                op.apply(&e0, &mut own_table);
+                applies += 1;
+            }
+            let tab: &[f64] = table.unwrap_or(&own_table);
+            let p = &p;
+            state = {
+                let parts: Vec<Red> = g
+                    .par_chunks_mut(CHUNK)
+                    .enumerate()
+                    .map(|(c, gc)| {
+                        let lo = c * CHUNK;
+                        pk::add_sparse(gc, lo, &changes, tab, ny, nx, periodic);
+                        let mut a = Red::ZERO;
+                        for (i, &gi) in gc.iter().enumerate() {
+                            a.observe(p[lo + i], gi, cap);
+                        }
+                        a
+                    })
+                    .collect();
+                parts.iter().fold(Red::ZERO, |a, b| a.merge(b))
+            };
             fresh = false;
         } else {
             state = fresh_gap(&p, &mut u, &mut g, &mut applies);

@@ -519,6 +519,7 @@ pub fn solve_with_kernel(
     if capped::finite_hardness(opts).is_some() {
         return capped::solve_with_operator(
             op,
+            table,
             problem,
             control,
             opts,
@@ -1319,7 +1320,7 @@ fn record(slots: &mut [(usize, f64)], a: &mut Acc, index: usize, d: f64) {
 /// `lo`, with `C` given by the table of [`Work::table`]. Each row segment is split where the
 /// table index wraps or reflects so the inner loops run over contiguous slices; every element
 /// adds the changes in their (index) order, whatever the thread count.
-fn add_sparse(
+pub(crate) fn add_sparse(
     out: &mut [f64],
     lo: usize,
     changes: &[(usize, f64)],
