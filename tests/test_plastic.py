@@ -140,7 +140,9 @@ def test_flat_punch_edges_saturate_first() -> None:
     assert np.max(np.abs(s.pressure.ravel() - want)) <= 1e-9 * cap
     # Pressed harder, the whole punch face reaches the hardness.
     full = ContactProblem(Surface(h, DX), hardness=cap).solve(mean_pressure=cap * a * a / n**2)
-    assert np.all(full.pressure[lo : lo + a, lo : lo + a] == cap)
+    face = full.pressure[lo : lo + a, lo : lo + a]
+    assert np.all(np.abs(face - cap) <= 1e-8 * cap)
+    assert full.pressure.sum() - face.sum() <= 1e-8 * cap
 
 
 @pytest.mark.parametrize("boundary", ["free", "periodic"])

@@ -130,7 +130,13 @@ class ContactState:
                 f"contact_fraction={self.contact_fraction:.4g}, "
                 f"mean_pressure={self.mean_pressure:.4g}, mean_gap={self.mean_gap:.4g}, "
                 f"solver={self.solver!r}, iterations={self.iterations}, kkt={self.kkt:.1e}, "
-                f"seconds={self.seconds:.3g})"
+                + (
+                    ""
+                    if self.hardness is None
+                    else f"hardness={self.hardness:.4g}, "
+                    f"plastic_fraction={self.plastic_fraction:.4g}, "
+                )
+                + f"seconds={self.seconds:.3g})"
             )
         except Exception:  # malformed fields (a hand-built state refused as a warm start)
             return (
@@ -384,7 +390,8 @@ class ContactProblem:
         return (
             f"ContactProblem({ny}x{nx} surface, dx={self.surface.dx:.6g}, "
             f"E*={self.e_star:.6g}, boundary={self.boundary!r}, "
-            f"h_s={self.h_range:.6g}, max_approach={self.max_approach:.6g})"
+            + ("" if self.hardness is None else f"hardness={self.hardness:.6g}, ")
+            + f"h_s={self.h_range:.6g}, max_approach={self.max_approach:.6g})"
         )
 
     def unloading(self, state: ContactState) -> ContactProblem:
@@ -494,6 +501,10 @@ class ContactProblem:
 
         ``threads``: threads of the solve (default ``None``: all cores, or
         ``RAYON_NUM_THREADS``); the result does not depend on it.
+
+        With the problem's ``hardness`` the pressure is capped at ``p ≤ H``
+        (``docs/plasticity.md``): ``"auto"`` runs Polonsky–Keer, the exact solvers are refused
+        (naming ``solver``), and ``mean_pressure`` must be ``≤ H``.
         """
         _validate.choice("solver", solver, SOLVERS)
         if self.hardness is not None and solver in ("active-set", "lawson-hanson"):

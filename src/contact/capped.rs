@@ -46,7 +46,8 @@
 //! and non-decreasing in `Δ`, linear between changes of the contact and plastic sets. The
 //! imposed mean pressure `p̄ ≤ H` is met by a bracketing root search on `Δ` (Illinois
 //! regula falsi, each solve warm-started from the previous pressure) until
-//! `|Σp/N − p̄| ≤ max(LOAD_RTOL, tol) · p̄`. `p̄ = H` has the closed-form answer `p ≡ H`
+//! `|Σp/N − p̄| ≤ max(LOAD_RTOL, tol) · p̄`. A cold solve starts from the elastic solution at
+//! the load (a loose elastic solve), whose clamped pressure and approach begin the search. `p̄ = H` has the closed-form answer `p ≡ H`
 //! everywhere, with the smallest approach that makes every gap `≤ 0`.
 //!
 //! # Certificate
@@ -74,6 +75,9 @@ use crate::grid::Boundary;
 
 /// Relative accuracy of the mean pressure in load control (or the solve's `tol`, if larger).
 pub const LOAD_RTOL: f64 = 1e-10;
+
+/// Tolerance of the elastic solve that starts a cold load-controlled capped solve.
+const ELASTIC_START_TOL: f64 = 1e-6;
 
 /// Root-search solves allowed in load control.
 const LOAD_MAX_SOLVES: usize = 200;
@@ -270,15 +274,45 @@ pub(crate) fn solve_with_operator(
             let mut hi: Option<(f64, f64)> = None;
             let mut d = if hs > 0.0 { 0.5 * hs } else { pbar * c00 };
             let mut applies0 = 0;
-            if let Some(p0) = opts.initial_pressure {
-                // A warm start also gives the approach: the mean over its free set of
+            let mut cost = CoarseCost::default();
+            // A cold start begins from the elastic solution at the load (a loose elastic
+            // solve): its pressure, clamped, is the first start.
+            let elastic = if opts.initial_pressure.is_none() {
+                let eo = Options {
+                    hardness: None,
+                    tol: ELASTIC_START_TOL.max(opts.tol),
+                    ..*opts
+                };
+                match pk::solve_with_kernel(op, table, problem, control, &eo) {
+                    Ok(sol) => {
+                        applies0 += sol.applies;
+                        cost = sol.coarse;
+                        Some(sol.pressure)
+                    }
+                    Err(Error::Interrupted) => return Err(Error::Interrupted),
+                    Err(_) => None,
+                }
+            } else {
+                None
+            };
+            let p_start = opts.initial_pressure.or(elastic.as_deref());
+            if let Some(p0) = p_start {
+                // A start pressure also gives the approach: the mean over its free set of
                 // `max h − h + C p` (the elastic solver's load-control formula).
                 if let Some(e) = approach_of(op, problem, hmax, p0, pbar, cap) {
                     d = e;
                 }
-                applies0 = 1;
+                applies0 += 1;
             }
-            let (mut warm, mut cost) = start_of(Control::Approach(d))?;
+            let mut warm = match p_start {
+                Some(p0) => Some(p0.to_vec()),
+                None => {
+                    let (w, c) = start_of(Control::Approach(d))?;
+                    cost = c;
+                    w
+                }
+            };
+            drop(elastic);
             let mut total = (0usize, applies0);
             let mut side = 0i32;
             for _ in 0..LOAD_MAX_SOLVES {
