@@ -98,6 +98,12 @@ pub fn check_hardness(hardness: f64) -> Result<()> {
     Ok(())
 }
 
+/// `x > 0` and not NaN.
+#[inline]
+fn positive(x: f64) -> bool {
+    x > 0.0
+}
+
 /// Partial reductions of one chunk.
 #[derive(Clone, Copy, Debug)]
 struct Red {
@@ -386,7 +392,7 @@ fn approach_of(
 ) -> Option<f64> {
     let n = p0.len();
     let sum: f64 = p0.iter().map(|&v| v.max(0.0)).sum();
-    if !(sum > 0.0) {
+    if !positive(sum) {
         return None;
     }
     let s = pbar * n as f64 / sum;
@@ -581,14 +587,14 @@ fn run(
                 0.0
             };
             gt = direction(&mut t, &p, &g, cap, beta, false);
-            if !(gt > 0.0) {
+            if !positive(gt) {
                 steepest = true;
             }
         }
         if steepest {
             gt = direction(&mut t, &p, &g, cap, 0.0, true);
         }
-        if !(gt > 0.0) {
+        if !positive(gt) {
             return Err(Error::NotConverged {
                 iterations: it,
                 residual: cert,
@@ -609,7 +615,7 @@ fn run(
         })
         .rt;
         let mut tau = gt / rt;
-        if !(rt > 0.0) || !tau.is_finite() {
+        if !positive(rt) || !tau.is_finite() {
             tau = ratio_test(&p, &t, cap);
             if !tau.is_finite() {
                 return Err(Error::NotConverged {
@@ -784,11 +790,11 @@ mod tests {
             s = s
                 .wrapping_mul(6364136223846793005)
                 .wrapping_add(1442695040888963407);
-            let ph = (s >> 11) as f64 / (1u64 << 53) as f64 * 6.28;
+            let ph = (s >> 11) as f64 / (1u64 << 53) as f64 * std::f64::consts::TAU;
             for i in 0..ny {
                 for j in 0..nx {
                     let x = (i as f64 / ny as f64 + j as f64 / nx as f64 * 0.7) * k as f64;
-                    h[i * nx + j] += (6.283 * x + ph).sin() / k as f64;
+                    h[i * nx + j] += (std::f64::consts::TAU * x + ph).sin() / k as f64;
                 }
             }
         }
