@@ -31,8 +31,9 @@ __all__ = ["CheckpointMismatch", "CHECKPOINT_FORMAT"]
 PathLike = str | os.PathLike[str]
 
 #: Record format: 2 bound records to their run, checksummed, with pressure fields; 3 added
-#: the leak-rate columns Q and K.
-CHECKPOINT_FORMAT = 3
+#: the leak-rate columns Q and K; 4 the branch and plastic columns and the plastic
+#: displacement of the last loading level of an unloading sweep.
+CHECKPOINT_FORMAT = 4
 
 
 @dataclass
@@ -47,6 +48,9 @@ class _Level:
     #: The level's pressure field (float64): the warm start of the next level, kept in
     #: checkpoints so that a resumed warm sweep repeats the same solves bit for bit.
     pressure: np.ndarray | None = None
+    #: The plastic displacement (float64) of the last loading level of an unloading sweep:
+    #: the permanent surface the unloading levels are solved on.
+    plastic: np.ndarray | None = None
 
     def contact_mask(self, shape: tuple[int, int]) -> np.ndarray:
         """The contact mask as a boolean array of ``shape``."""
@@ -107,7 +111,7 @@ class _Checkpoint:
                 raise CheckpointMismatch(
                     self.dir,
                     f"checkpoint format {found.get('format')!r}, this leakpath reads "
-                    f"{wanted['format']} (format 3 adds the leak-rate columns Q, K)",
+                    f"{wanted['format']} (format 4 adds the branch and plastic columns)",
                 )
             for key in _differences(found, wanted):
                 raise CheckpointMismatch(self.dir, key)
@@ -120,19 +124,23 @@ class _Checkpoint:
     def _npz(self, k: int) -> Path:
         return self.dir / f"level_{k:04d}.npz"
 
-    def load(self, k: int, shape: tuple[int, int], need_pressure: bool) -> _Level | None:
+    def load(
+        self, k: int, shape: tuple[int, int], need_pressure: bool, need_plastic: bool = False
+    ) -> _Level | None:
         """The checked level ``k``, or ``None`` (absent, or failed a check: see
         :attr:`recomputed`)."""
         path = self._json(k)
         if not path.exists():
             return None
         try:
-            return self._load_checked(k, shape, need_pressure)
+            return self._load_checked(k, shape, need_pressure, need_plastic)
         except _BadCheckpoint as exc:
             self.recomputed.append((k, str(exc)))
             return None
 
-    def _load_checked(self, k: int, shape: tuple[int, int], need_pressure: bool) -> _Level:
+    def _load_checked(
+        self, k: int, shape: tuple[int, int], need_pressure: bool, need_plastic: bool
+    ) -> _Level:
         try:
             data = json.loads(self._json(k).read_text(encoding="utf-8"))
         except (OSError, ValueError) as exc:
@@ -159,6 +167,14 @@ class _Checkpoint:
                 pressure = unpack(packed, "<f8", shape)
                 if not np.all(np.isfinite(pressure)):
                     raise _BadCheckpoint("non-finite pressure")
+            plastic = None
+            if need_plastic:
+                packed_w = data.get("plastic")
+                if not isinstance(packed_w, str):
+                    raise _BadCheckpoint("no plastic displacement to unload from")
+                plastic = unpack(packed_w, "<f8", shape)
+                if not (np.all(np.isfinite(plastic)) and np.all(plastic >= 0)):
+                    raise _BadCheckpoint("non-finite or negative plastic displacement")
         except _BadCheckpoint:
             raise
         except (KeyError, TypeError, ValueError, zlib.error, binascii.Error) as exc:
@@ -180,7 +196,7 @@ class _Checkpoint:
                 raise _BadCheckpoint("its fields file does not match its checksum")
             with np.load(io.BytesIO(raw), allow_pickle=False) as z:
                 fields = {name: z[name] for name in ("pressure", "gap", "labels")}
-        return _Level(row, seconds, mask, classes, fields, pressure)
+        return _Level(row, seconds, mask, classes, fields, pressure, plastic)
 
     def save(self, k: int, level: _Level, shape: tuple[int, int]) -> None:
         record: dict[str, Any] = {
@@ -194,6 +210,8 @@ class _Checkpoint:
         }
         if level.pressure is not None:
             record["pressure"] = pack(np.asarray(level.pressure, dtype="<f8"))
+        if level.plastic is not None:
+            record["plastic"] = pack(np.asarray(level.plastic, dtype="<f8"))
         if level.fields is not None:
             buf = io.BytesIO()
             np.savez_compressed(buf, **level.fields)

@@ -69,6 +69,9 @@ class ContactSolution:
     def contact_points(self) -> int:
         """``#(p > 0)``."""
     @property
+    def plastic_points(self) -> int:
+        """Points at the hardness, ``p = H`` (0 without a hardness)."""
+    @property
     def load(self) -> float:
         """``F = dx² Σ p`` [pressure · length²]."""
     @property
@@ -232,6 +235,7 @@ class ContactProblem:
         precondition: bool = True,
         coarse_start: bool = True,
         chord_steps: bool = True,
+        hardness: float | None = None,
     ) -> ContactSolution:
         """Solve at ``approach`` or at ``mean_pressure`` (exactly one; the exact solvers take
         the approach only). ``start``: ``"cold"`` (p = 0), ``"previous"`` (this problem's
@@ -262,7 +266,14 @@ class ContactProblem:
         chord step with one FFT product of the whole change and an exact line search).
         ``ProblemTooLargeError`` (a ``MemoryError``) up front when the solve would need more
         than the problem's ``memory_limit``. The GIL is released; Ctrl-C raises
-        ``KeyboardInterrupt`` within a fraction of a second."""
+        ``KeyboardInterrupt`` within a fraction of a second.
+
+        ``hardness``: cap the pressure at ``p ≤ H`` (elastic–perfectly-plastic contact,
+        ``docs/plasticity.md``; Polonsky–Keer only, ``"auto"`` resolves to it, the exact
+        solvers are refused): points at ``p = H`` may have ``g < 0`` (plastic
+        interpenetration), ``plastic_points`` counts them. The preconditioner and chord steps
+        are not used then; the coarse start is kept. Load control requires
+        ``mean_pressure ≤ hardness``. ``None``/``inf``: the elastic solve, bit for bit."""
 
 # ---- clusters ----
 def label_clusters(

@@ -17,13 +17,18 @@ Columns (lengths ``L`` in the surface's unit, pressures in the unit of ``E``)
 column                 definition                                                        unit
 =====================  ================================================================  =====
 ``k``                  level index
-``approach``           imposed approach ``Δ``                                            L
+``branch``             ``loading``, or ``unloading`` (``unload=True``, after the last
+                       loading row, on its permanently deformed surface)
+``approach``           imposed approach ``Δ`` (referenced to the original surface's      L
+                       highest point on both branches)
 ``approach_star``      ``Δ* = Δ/h_s``
 ``n_contact``          ``#(p > 0)``
 ``contact_fraction``   ``a = #(p > 0)/N``
 ``contact_area``       ``A = #(p > 0)·dx²``                                              L²
 ``load``               ``F = dx² Σ p``                                                   E·L²
 ``mean_pressure``      ``p̄ = F/A0``, ``A0 = N·dx²``                                      E
+``plastic_fraction``   ``#(w_p > 0)/N``, area deformed plastically (``hardness``; else 0)
+``plastic_volume``     ``V_pl = dx² Σ w_p``, plastic displacement ``w_p``                  L³
 ``free_volume``        ``V = dx² Σ g``, gap ``g = max h − Δ − h + u``                    L³
 ``free_volume_star``   ``V* = V/(A0·σ)``, ``σ = √m0`` of the undeformed surface
 ``mean_gap``           ``ḡ = V/A0``                                                      L
@@ -47,7 +52,18 @@ column                 definition                                               
                        (:mod:`leakpath.leakage`; NaN with ``flow=False``)                1
 =====================  ================================================================  =====
 
-``V = V_pg + V_dead + V_trapped`` for each axis (to round-off). Wall-clock ``seconds`` per
+``V = V_pg + V_dead + V_trapped`` for each axis (to round-off).
+
+Hardness and unloading
+----------------------
+``hardness=H`` caps the contact pressure at ``p ≤ H`` on every level (elastic–perfectly-plastic
+contact; ``docs/plasticity.md``). Each loading level is solved on the original surface (the
+path-independence of monotonic loading under this model). ``unload=True`` appends an
+unloading branch: the levels of the loading branch in reverse order (without the last one),
+solved on the permanently deformed surface ``h − w_p`` of the last loading level, where the
+plastic part does not recover. The recommended use is load control (``mean_pressures``): the
+unloading rows then sit at the same nominal pressures as loading rows, which is where the
+leak rates of the two branches are compared. Wall-clock ``seconds`` per
 level are kept in :attr:`SweepResult.seconds` and in the JSON metadata, not in the CSV: the
 CSV holds only numbers that a rerun reproduces bit for bit.
 
@@ -150,6 +166,19 @@ def _resolve_approaches(problem: ContactProblem, levels: int, approaches: Any) -
     )
 
 
+def _resolve_hardness(hardness: Any, solver: str) -> float | None:
+    from .contact import check_hardness
+
+    h = check_hardness(hardness)
+    if h is not None and solver in ("active-set", "lawson-hanson"):
+        raise InvalidArgumentError(
+            f"solver: {solver!r} cannot cap the pressure at a hardness; use solver='auto' or "
+            "'polonsky-keer' with hardness=",
+            argument="solver",
+        )
+    return h
+
+
 def _resolve_mean_pressures(mean_pressures: Any) -> list[float]:
     return _validate.increasing("mean_pressures", mean_pressures, _validate.mean_pressure)
 
@@ -175,7 +204,7 @@ def _solve_accepted(
 
     Returns the state, the iterations summed over the solves and the number of re-solves.
     """
-    kind, value = level
+    kind, value = level[0], level[1]
     state = problem.solve(  # type: ignore[call-overload]
         **{kind: value}, solver=solver, warm_start=warm, threads=threads
     )
@@ -192,6 +221,17 @@ def _solve_accepted(
                 iterations=iterations,
                 residual=state.kkt,
             )
+        if problem.hardness is not None:
+            # The exact solvers take no cap: Polonsky–Keer again, from the returned pressure.
+            state = problem.solve(  # type: ignore[call-overload]
+                **{kind: value},
+                solver="polonsky-keer",
+                warm_start=state.pressure,
+                threads=threads,
+            )
+            iterations += state.iterations
+            restarts += 1
+            continue
         restart_solver = "active-set" if solver in ("polonsky-keer", "auto") else solver
         state = problem.solve(  # type: ignore[arg-type]
             approach, solver=restart_solver, warm_start=state.contact, threads=threads
@@ -202,7 +242,7 @@ def _solve_accepted(
 
 
 def _warm_start_for(
-    done: Sequence[_Level], level_list: Sequence[tuple[str, float]], k: int, shape: Any
+    done: Sequence[_Level], level_list: Sequence[tuple[Any, ...]], k: int, shape: Any
 ) -> np.ndarray:
     """Start of level ``k`` from the levels before it.
 
@@ -221,7 +261,7 @@ def _warm_start_for(
         return p1
     v0, v1, vk = level_list[k - 2][1], level_list[k - 1][1], level_list[k][1]
     if not (v1 > v0 and v0 > 0):  # the Δ = 0 level carries no information on the slope
-        return p1
+        return p1  # (nor does the other branch: unloading starts from the last pressure)
     p0 = done[-2].pressure
     return np.maximum(p1 + (vk - v1) / (v1 - v0) * (p1 - p0), 0.0)
 
@@ -248,6 +288,7 @@ def _analyse(
     k: int,
     state: ContactState,
     *,
+    branch: str = "loading",
     iterations: int,
     restarts: int,
     axis: Any,
@@ -265,12 +306,15 @@ def _analyse(
     n_contact = int(np.count_nonzero(state.contact))
     row: dict[str, Any] = {
         "k": k,
+        "branch": branch,
         "approach": float(state.approach),
         "n_contact": n_contact,
         "contact_fraction": state.contact_fraction,
         "contact_area": state.contact_area,
         "load": state.load,
         "mean_pressure": state.mean_pressure,
+        "plastic_fraction": state.plastic_fraction,
+        "plastic_volume": state.plastic_volume,
         "free_volume": state.free_volume,
         "mean_gap": state.mean_gap,
         "V_pg": float(pa.spanning_volume),
@@ -316,6 +360,8 @@ def sweep(
     checkpoint_dir: PathLike | None = None,
     flow: bool | None = None,
     flow_axis: int | None = None,
+    hardness: float | None = None,
+    unload: bool = False,
 ) -> SweepResult:
     """Solve the contact of ``surface`` at increasing approaches and tabulate each level.
 
@@ -361,6 +407,13 @@ def sweep(
         ``False`` (NaN columns), or ``None`` (default: on up to 513² points).
     flow_axis : 0 or 1, optional
         Direction of the leak (default: ``axis`` when it is 0 or 1, else 0).
+    hardness : float, optional
+        Hardness ``H`` [E's unit]: cap the pressure at ``p ≤ H`` (elastic–perfectly-plastic
+        contact, Polonsky–Keer; ``docs/plasticity.md``). Mean pressures must be ``≤ H``.
+    unload : bool
+        Append an unloading branch (``branch = "unloading"`` rows): the loading levels in
+        reverse order, without the last, solved on the permanently deformed surface of the
+        last loading level (module docstring).
 
     Returns
     -------
@@ -387,6 +440,8 @@ def sweep(
             "and there is no approach to sweep; check the heights (units, a constant file)"
         )
     _validate.choice("solver", solver, SOLVERS)
+    hardness = _resolve_hardness(hardness, solver)
+    unload = _validate.flag("unload", unload)
     if checkpoint_dir is not None:  # before any solve
         checkpoint_dir = _validate.path("checkpoint_dir", checkpoint_dir)
     warm_start = _validate.flag("warm_start", warm_start)
@@ -396,7 +451,9 @@ def sweep(
     connectivity = _check_connectivity(connectivity)
     flow_on = leakage.flow_enabled(flow, surface.shape)  # leakpath.leakage
     flow_axis = leakage.flow_axis_for(flow_axis, axis)
-    problem = ContactProblem(surface, E=E, nu=nu, boundary=boundary)  # type: ignore[arg-type]
+    problem = ContactProblem(
+        surface, E=E, nu=nu, boundary=boundary, hardness=hardness  # type: ignore[arg-type]
+    )
     if approaches is not None and mean_pressures is not None:
         raise InvalidArgumentError(
             "mean_pressures: give approaches= or mean_pressures=, not both",
@@ -406,16 +463,28 @@ def sweep(
         pressure_list = _resolve_mean_pressures(mean_pressures)
         for v in (pressure_list[0], pressure_list[-1]):  # refused up front, not mid-sweep
             _validate.load_scales(v, problem.e_star, surface.dx, name="mean_pressures")
-        level_list = [("mean_pressure", v) for v in pressure_list]
+        if hardness is not None and pressure_list[-1] > hardness:
+            raise InvalidArgumentError(
+                f"mean_pressures: {pressure_list[-1]!r} exceeds the hardness {hardness!r}; a "
+                "perfectly plastic surface carries at most p̄ = hardness",
+                argument="mean_pressures",
+            )
+        loading = [("mean_pressure", v, "loading") for v in pressure_list]
         approach_list = None
     else:
         approach_list = _resolve_approaches(problem, n_levels, approaches)
-        level_list = [("approach", v) for v in approach_list]
+        loading = [("approach", v, "loading") for v in approach_list]
         pressure_list = None
+    n_loading = len(loading)
+    level_list = loading + (
+        [(kind, v, "unloading") for kind, v, _ in reversed(loading[:-1])] if unload else []
+    )
     run_solver = solver
     # Polonsky–Keer warm-starts from the previous pressure field, which checkpoints keep.
-    uses_pk = solver == "polonsky-keer" or (
-        solver == "auto" and surface.heights.size > AUTO_ACTIVE_SET_MAX_POINTS
+    uses_pk = (
+        solver == "polonsky-keer"
+        or hardness is not None
+        or (solver == "auto" and surface.heights.size > AUTO_ACTIVE_SET_MAX_POINTS)
     )
     keep_pressure = bool(warm_start) and (uses_pk or mean_pressures is not None)
     t_total = time.perf_counter()
@@ -440,6 +509,8 @@ def sweep(
         "keep_fields": bool(keep_fields),
         "flow": flow_on,  # leakpath.leakage
         "flow_axis": flow_axis,
+        "hardness": hardness,
+        "unload": bool(unload),
     }
 
     # Undeformed reference (Δ = 0: p = 0, u = 0, the whole interface is free).
@@ -518,12 +589,13 @@ def sweep(
                 lv.pressure = None
 
     def analysis(
-        k: int, state: ContactState, iterations: int, restarts: int
+        k: int, state: ContactState, iterations: int, restarts: int, branch: str
     ) -> Callable[[int | None], _Analysis]:
         def run(threads: int | None) -> _Analysis:
             return _analyse(
                 k,
                 state,
+                branch=branch,
                 iterations=iterations,
                 restarts=restarts,
                 axis=axis,
@@ -534,12 +606,24 @@ def sweep(
 
         return run
 
+    # The problem each branch is solved on: the original surface while loading; on
+    # unloading, the permanent surface of the last loading level.
+    solving = problem
+    top = n_loading - 1
     try:
         flows.submit("reference", ref_state)
         for k, target in enumerate(level_list):
+            branch = target[2]
+            if k == n_loading:
+                plastic = done[top].plastic
+                if plastic is None:  # pragma: no cover - kept by the loading branch
+                    raise RuntimeError("the last loading level kept no plastic displacement")
+                solving = problem._unloading_from(plastic)
             level = None
             if checkpoint is not None:
-                level = checkpoint.load(k, shape, need_pressure=keep_pressure)
+                level = checkpoint.load(
+                    k, shape, need_pressure=keep_pressure, need_plastic=unload and k == top
+                )
             if level is not None:
                 resumed.append(k)
                 if bar is not None:
@@ -550,7 +634,7 @@ def sweep(
                     warm = _warm_start_for(done, level_list, k, shape)
                 t0 = time.perf_counter()
                 state, iterations, restarts = _solve_accepted(
-                    problem, target, run_solver, warm, threads
+                    solving, target, run_solver, warm, threads
                 )
                 # What the next levels start from now; the row, class map and fields follow
                 # with the leak rate (`record`).
@@ -562,9 +646,14 @@ def sweep(
                     pressure=(
                         np.array(state.pressure, dtype="<f8") if keep_pressure else None
                     ),
+                    plastic=(
+                        np.array(state.plastic_displacement, dtype="<f8")
+                        if unload and k == top
+                        else None
+                    ),
                 )
                 waiting[k] = level
-                flows.submit(k, state, analysis(k, state, iterations, restarts))
+                flows.submit(k, state, analysis(k, state, iterations, restarts, branch))
             done.append(level)
             record(flows.finished())
         record(flows.finish())

@@ -46,6 +46,7 @@ AXES: tuple[Any, ...] = (0, 1, "either", "both")
 # (name, type) of every column, in CSV order. Types: "f" float, "i" int, "s" str.
 _COLUMN_SPEC: tuple[tuple[str, str], ...] = (
     ("k", "i"),
+    ("branch", "s"),
     ("approach", "f"),
     ("approach_star", "f"),
     ("n_contact", "i"),
@@ -54,6 +55,8 @@ _COLUMN_SPEC: tuple[tuple[str, str], ...] = (
     ("load", "f"),
     ("mean_pressure", "f"),
     ("mean_pressure_star", "f"),
+    ("plastic_fraction", "f"),
+    ("plastic_volume", "f"),
     ("free_volume", "f"),
     ("free_volume_star", "f"),
     ("mean_gap", "f"),
@@ -114,9 +117,11 @@ def _units(length: str, pressure: str) -> dict[str, str]:
         mean_pressure=P,
         free_volume=f"{L}^3",
         mean_gap=L,
+        plastic_volume=f"{L}^3",
         m0=f"{L}^2",
         m4=f"{L}^-2",
         solver="",
+        branch="",
     )
     for c in COLUMNS:
         if c.startswith(("V_pg", "V_dead", "V_trapped")) and not c.endswith("_star"):
@@ -378,7 +383,10 @@ class SweepResult:
         class map per row in ``levels_to_map`` (default
         :func:`leakpath.plotting.default_map_levels`) and, when the table has leak-rate
         columns, ``fig4_leak_rate`` and one flux map per row in ``flux_levels`` (default:
-        the last leaking row).
+        the last leaking row); for a sweep with a hardness or an unloading branch also
+        ``fig5_plastic_leak_rate`` (leak rate against nominal pressure, both branches) and
+        ``fig6_plastic_area`` (contact and plastic area fractions,
+        :mod:`leakpath.plotting.plastic`).
 
         Without ``outdir`` nothing is written: returns a dict file stem → matplotlib
         :class:`~matplotlib.figure.Figure` (``"fig1_topography_moments"``, …,
@@ -391,14 +399,17 @@ class SweepResult:
         """
         from .plotting.flow import flow_figures, save_flow_figures
         from .plotting.paper import paper_figures, save_paper_figures
+        from .plotting.plastic import plastic_figures, save_plastic_figures
 
         if outdir is None:
             return {
                 **paper_figures(self, levels_to_map=levels_to_map),
                 **flow_figures(self, flux_levels=flux_levels),
+                **plastic_figures(self),
             }
         paths = save_paper_figures(self, outdir, formats=formats, levels_to_map=levels_to_map)
-        return paths + save_flow_figures(self, outdir, formats=formats, flux_levels=flux_levels)
+        paths += save_flow_figures(self, outdir, formats=formats, flux_levels=flux_levels)
+        return paths + save_plastic_figures(self, outdir, formats=formats)
 
 
 _DEFINITIONS = {
@@ -408,7 +419,10 @@ _DEFINITIONS = {
     "V_pg_star": "V_pg/V_pg(Delta=0) for the chosen axis",
     **leakage.FLOW_DESCRIPTIONS,  # leakpath.leakage
     "m_star": "m_n/m_n(undeformed), alpha_star likewise",
-    "gap": "g = max h - Delta - h + u",
+    "gap": "g = max h - Delta - h + w_p + u (w_p: plastic displacement, 0 without hardness)",
+    "branch": "loading, or unloading from the last loading row (sweep(unload=True))",
+    "plastic_fraction": "#(w_p > 0)/N, area fraction deformed plastically (hardness)",
+    "plastic_volume": "dx^2 sum w_p, volume displaced plastically (hardness)",
     "moments": "finite differences on s = h - u (leakpath.moments.nayak_moments)",
 }
 

@@ -13,6 +13,12 @@ Any approach ``Δ ≥ 0`` is allowed (about half a rough patch is in contact at 
 ``boundary="periodic"``: the surface repeats and ``u`` has zero mean; full contact is reached
 at ``Δ = max h − mean h`` and a larger approach is an error. The conventions are written out
 in ``docs/conventions.md``.
+
+``hardness=H`` caps the contact pressure at ``p ≤ H`` (elastic–perfectly-plastic contact,
+Polonsky–Keer only): points at ``p = H`` yield, and the interpenetration ``−g`` there is kept
+as permanent plastic deformation (:attr:`ContactState.plastic_displacement`).
+:meth:`ContactProblem.unloading` solves the elastic(-capped) contact of the permanently
+deformed surface. See ``docs/plasticity.md``.
 """
 
 from __future__ import annotations
@@ -108,6 +114,13 @@ class ContactState:
     #: grids, each weighted by its grid's share of the fine points (a 2× coarser product
     #: counts ¼); 0 when there was none.
     coarse_fft_products: float = 0.0
+    #: The hardness ``H`` [pressure] the pressure was capped at (``None``: elastic).
+    hardness: float | None = None
+    #: Permanent plastic displacement ``w_p ≥ 0`` [length] of the surface, relative to
+    #: ``heights``: the interpenetration ``−g`` at the points that yielded (``p = H``) in this
+    #: solve plus the deformation of the surface it was solved on (an unloading problem);
+    #: ``None``: none (zeros).
+    plastic_displacement_field: np.ndarray | None = field(default=None, repr=False)
 
     def __repr__(self) -> str:
         # One line of scalars: the fields are grids, shown by their shape only.
@@ -118,7 +131,13 @@ class ContactState:
                 f"contact_fraction={self.contact_fraction:.4g}, "
                 f"mean_pressure={self.mean_pressure:.4g}, mean_gap={self.mean_gap:.4g}, "
                 f"solver={self.solver!r}, iterations={self.iterations}, kkt={self.kkt:.1e}, "
-                f"seconds={self.seconds:.3g})"
+                + (
+                    ""
+                    if self.hardness is None
+                    else f"hardness={self.hardness:.4g}, "
+                    f"plastic_fraction={self.plastic_fraction:.4g}, "
+                )
+                + f"seconds={self.seconds:.3g})"
             )
         except Exception:  # malformed fields (a hand-built state refused as a warm start)
             return (
@@ -147,8 +166,48 @@ class ContactState:
 
     @property
     def deformed(self) -> np.ndarray:
-        """Deformed surface ``s = h − u``."""
-        return self.heights - self.displacement
+        """Deformed surface ``s = h − w_p − u`` (``w_p``: the plastic displacement, 0 for
+        elastic contact)."""
+        if self.plastic_displacement_field is None:
+            return self.heights - self.displacement
+        return self.heights - self.plastic_displacement_field - self.displacement
+
+    @property
+    def plastic_displacement(self) -> np.ndarray:
+        """Permanent plastic displacement ``w_p ≥ 0`` [length] (zeros for elastic contact):
+        ``−g`` of the elastic–plastic solution at points at the hardness, plus any deformation
+        the solved surface already had (``docs/plasticity.md``)."""
+        if self.plastic_displacement_field is None:
+            return np.zeros_like(self.pressure)
+        return self.plastic_displacement_field
+
+    @property
+    def permanent_surface(self) -> np.ndarray:
+        """The permanently deformed surface ``h − w_p`` [length]: what is left after
+        complete unloading (the elastic part recovers)."""
+        return self.heights - self.plastic_displacement
+
+    @cached_property
+    def plastic(self) -> np.ndarray:
+        """Plastically deformed points ``w_p > 0``."""
+        return self.plastic_displacement > 0
+
+    @cached_property
+    def yielding(self) -> np.ndarray:
+        """Points at the hardness in this state, ``p ≥ H`` (all False without one)."""
+        if self.hardness is None:
+            return np.zeros(self.pressure.shape, dtype=bool)
+        return self.pressure >= self.hardness
+
+    @property
+    def plastic_fraction(self) -> float:
+        """``a_pl = #(w_p > 0)/N``: area fraction deformed plastically."""
+        return float(np.count_nonzero(self.plastic) / self.n_points)
+
+    @property
+    def plastic_volume(self) -> float:
+        """``V_pl = dx² Σ w_p`` [length³]: volume displaced plastically."""
+        return float(self.plastic_displacement.sum() * self.dx**2)
 
     @property
     def load(self) -> float:
@@ -221,6 +280,15 @@ class ContactState:
             "iterations": self.iterations,
             "kkt": self.kkt,
             "seconds": self.seconds,
+            **(
+                {}
+                if self.hardness is None
+                else {
+                    "hardness": self.hardness,
+                    "plastic_fraction": self.plastic_fraction,
+                    "plastic_volume": self.plastic_volume,
+                }
+            ),
         }
 
     def flow(
@@ -266,6 +334,31 @@ class ContactState:
         )
 
 
+def check_hardness(hardness: Any) -> float | None:
+    """``hardness`` as a positive float [pressure], or ``None`` for none (``None`` or
+    ``inf``); anything else raises :class:`~leakpath.errors.InvalidArgumentError` naming it."""
+    if hardness is None:
+        return None
+    if isinstance(hardness, (bool, np.bool_)) or not isinstance(
+        hardness, (int, float, np.integer, np.floating)
+    ):
+        raise InvalidArgumentError(
+            f"hardness: expected a positive number [pressure, E's unit] or None, got "
+            f"{type(hardness).__name__} {_validate.describe(hardness, 40)}",
+            argument="hardness",
+        )
+    h = float(hardness)
+    if h == math.inf:
+        return None
+    if not (h > 0 and math.isfinite(h)):
+        raise InvalidArgumentError(
+            f"hardness: must be a positive number (or None / inf for elastic contact), got "
+            f"{hardness!r}",
+            argument="hardness",
+        )
+    return h
+
+
 def _describe_start(value: Any) -> str:
     """A short description of a rejected ``warm_start``: its type and value."""
     return f"{type(value).__name__} {_validate.describe(value, 40)}"
@@ -289,6 +382,10 @@ class ContactProblem:
 
     Keeps the influence kernel, the FFT operator and the Lawson–Hanson Cholesky factor between
     solves, so a sweep over increasing approaches can warm-start from the previous level.
+
+    ``hardness``: the hardness ``H`` [pressure, the unit of ``E``] of the surface: every solve
+    caps the pressure at ``p ≤ H`` (elastic–perfectly-plastic contact, Polonsky–Keer; ``None``
+    or ``inf``: elastic). See ``docs/plasticity.md``.
     """
 
     def __init__(
@@ -300,11 +397,20 @@ class ContactProblem:
         boundary: Boundary = "free",
         dx: float | None = None,
         memory_limit: int | None = None,
+        hardness: float | None = None,
     ) -> None:
         self.surface = _as_surface(surface, dx)
         check_slope(self.surface, stacklevel=2)  # the small-slope model's range
         self.boundary = _validate.boundary(boundary)
         self.e_star = contact_modulus(E, nu)
+        self.hardness = check_hardness(hardness)
+        #: Plastic displacement of the surface this problem solves relative to the original
+        #: one (an unloading problem, :meth:`unloading`), and the height of the original's
+        #: highest point above this surface's (the approach offset): approaches stay referenced
+        #: to the original surface's highest point.
+        self._plastic_base: np.ndarray | None = None
+        self._original: np.ndarray | None = None
+        self._approach_offset = 0.0
         _validate.contact_scales(self.e_star, self.surface.dx, self.surface.height_range)
         limit = _validate.memory_limit(memory_limit)
         self.memory_limit = default_memory_limit() if limit is None else limit
@@ -322,8 +428,49 @@ class ContactProblem:
         return (
             f"ContactProblem({ny}x{nx} surface, dx={self.surface.dx:.6g}, "
             f"E*={self.e_star:.6g}, boundary={self.boundary!r}, "
-            f"h_s={self.h_range:.6g}, max_approach={self.max_approach:.6g})"
+            + ("" if self.hardness is None else f"hardness={self.hardness:.6g}, ")
+            + f"h_s={self.h_range:.6g}, max_approach={self.max_approach:.6g})"
         )
+
+    def unloading(self, state: ContactState) -> ContactProblem:
+        """The contact problem of ``state``'s permanently deformed surface ``h − w_p``, for
+        unloading (and reloading) after plastic deformation.
+
+        Same ``E*``, boundary, ``dx`` and hardness. Approaches (given and reported) stay
+        referenced to the highest point of the *original* surface: the flat sits at
+        ``max h − Δ``. Its states carry the permanent ``w_p`` of ``state`` (plus any new
+        yield), their ``heights`` are the original ones, so ``gap``, ``deformed`` and the
+        percolation and flow of the free volume are those of the deformed interface.
+        """
+        if not isinstance(state, ContactState):
+            raise InvalidArgumentError(
+                f"state: expected a ContactState, got {type(state).__name__}", argument="state"
+            )
+        original = self._original if self._original is not None else self._h
+        if state.pressure.shape != original.shape or state.dx != self.surface.dx:
+            raise InvalidArgumentError(
+                "state: not a state of this problem's surface (shape or dx differ)",
+                argument="state",
+            )
+        return self._unloading_from(np.array(state.plastic_displacement, dtype=np.float64))
+
+    def _unloading_from(self, w: np.ndarray) -> ContactProblem:
+        """:meth:`unloading` from a plastic displacement field ``w ≥ 0`` of the original
+        surface."""
+        original = self._original if self._original is not None else self._h
+        deformed = original - w
+        out = ContactProblem(
+            Surface(deformed, self.surface.dx),
+            E=self.e_star,
+            nu=0.0,
+            boundary=self.boundary,  # type: ignore[arg-type]
+            memory_limit=self.memory_limit,
+            hardness=self.hardness,
+        )
+        out._plastic_base = w
+        out._original = original
+        out._approach_offset = float(original.max()) - out.h_max
+        return out
 
     @property
     def max_approach(self) -> float:
@@ -335,8 +482,10 @@ class ContactProblem:
 
     def _check_approach(self, approach: float) -> float:
         # A free-boundary patch keeps gaining contact past h_s (about half of it is in
-        # contact at Δ = h_s); any approach is a well-posed problem there.
-        full = self.max_approach if self.boundary == "periodic" else None
+        # contact at Δ = h_s), and a capped problem is well posed at any approach (periodic:
+        # past full contact the pressure rises to the hardness everywhere).
+        periodic_elastic = self.boundary == "periodic" and self.hardness is None
+        full = self.max_approach if periodic_elastic else None
         return _validate.approach(approach, full_contact=full)
 
     def solve(
@@ -381,8 +530,18 @@ class ContactProblem:
 
         ``threads``: threads of the solve (default ``None``: all cores, or
         ``RAYON_NUM_THREADS``); the result does not depend on it.
+
+        With the problem's ``hardness`` the pressure is capped at ``p ≤ H``
+        (``docs/plasticity.md``): ``"auto"`` runs Polonsky–Keer, the exact solvers are refused
+        (naming ``solver``), and ``mean_pressure`` must be ``≤ H``.
         """
         _validate.choice("solver", solver, SOLVERS)
+        if self.hardness is not None and solver in ("active-set", "lawson-hanson"):
+            raise InvalidArgumentError(
+                f"solver: {solver!r} cannot cap the pressure at a hardness; use solver='auto' "
+                "or 'polonsky-keer' with hardness=",
+                argument="solver",
+            )
         threads = _validate.threads(threads)
         tol = DEFAULT_TOL if tol is None else _validate.positive("tol", tol)
         max_iter = _validate.optional_integer("max_iter", max_iter, low=1)
@@ -395,6 +554,13 @@ class ContactProblem:
         if mean_pressure is not None:
             pbar = _validate.mean_pressure(mean_pressure)
             _validate.load_scales(pbar, self.e_star, self.surface.dx)
+            if self.hardness is not None and pbar > self.hardness:
+                raise InvalidArgumentError(
+                    f"mean_pressure: {pbar:.6g} exceeds the hardness {self.hardness:.6g}; a "
+                    "perfectly plastic surface carries at most p̄ = hardness (every point "
+                    "yielding); give mean_pressure ≤ hardness",
+                    argument="mean_pressure",
+                )
             if solver in ("active-set", "lawson-hanson"):
                 raise InvalidArgumentError(
                     f"solver: {solver!r} imposes the approach only; use solver='auto' or "
@@ -404,8 +570,15 @@ class ContactProblem:
             start = self._check_warm_start(warm_start, None, pbar)
             return self._solve(None, pbar, solver, start, tol, max_iter, threads)
         a = self._check_approach(approach)
+        lift = 0.0
+        if self._approach_offset:
+            # The approach is referenced to the original surface's highest point; a flat
+            # above the deformed surface's highest point touches nothing (p = 0) and stands
+            # `lift` above it.
+            lift = max(self._approach_offset - a, 0.0)
+            a = max(a - self._approach_offset, 0.0)
         start = self._check_warm_start(warm_start, a, None)
-        return self._solve(a, None, solver, start, tol, max_iter, threads)
+        return self._solve(a, None, solver, start, tol, max_iter, threads, lift)
 
     #: A pressure start whose largest value exceeds this multiple of the largest pressure a
     #: solution can have (:meth:`_pressure_bound`) is refused: it says nothing about the
@@ -525,6 +698,7 @@ class ContactProblem:
         tol: float,
         max_iter: int | None,
         threads: int | None = None,
+        lift: float = 0.0,
     ) -> ContactState:
         out = self._core.solve(
             approach=a,
@@ -533,19 +707,36 @@ class ContactProblem:
             tol=tol,
             max_iter=max_iter,
             threads=threads,
+            hardness=self.hardness,
             **self._start(warm_start),
         )
-        state = self._state(out)
+        state = self._state(out, lift)
         self._last = state
         return state
 
-    def _state(self, out: _core.ContactSolution) -> ContactState:
+    def _state(self, out: _core.ContactSolution, lift: float = 0.0) -> ContactState:
+        # ``lift``: the unloading problem's flat reference sits ``lift`` below the deformed
+        # surface's top (see :meth:`unloading`); the state reports gaps and approaches of
+        # the original surface.
+        gap = out.gap + lift if lift > 0 else out.gap
+        plastic = None
+        if self.hardness is not None:
+            # Points at the hardness have flowed: their interpenetration −g is permanent, and
+            # the flattened surface touches the flat there (gap 0).
+            yielded = out.pressure >= self.hardness
+            new = np.where(yielded, np.maximum(-gap, 0.0), 0.0)
+            gap = np.where(yielded, np.maximum(gap, 0.0), gap)
+            plastic = new if self._plastic_base is None else self._plastic_base + new
+        elif self._plastic_base is not None:
+            plastic = self._plastic_base
         return ContactState(
-            approach=out.approach,
+            approach=out.approach - lift + self._approach_offset,
             pressure=out.pressure,
             displacement=out.displacement,
-            gap=out.gap,
-            heights=self._h,
+            gap=gap,
+            hardness=self.hardness,
+            plastic_displacement_field=plastic,
+            heights=self._h if self._original is None else self._original,
             dx=self.surface.dx,
             e_star=self.e_star,
             boundary=self.boundary,
@@ -573,15 +764,23 @@ def solve(
     max_iter: int | None = None,
     dx: float | None = None,
     memory_limit: int | None = None,
+    hardness: float | None = None,
 ) -> ContactState:
     """Solve the contact of ``surface`` with a rigid flat at an imposed approach, or at an
-    imposed ``mean_pressure`` (load control).
+    imposed ``mean_pressure`` (load control); ``hardness`` caps the pressure at ``p ≤ H``
+    (elastic–perfectly-plastic, ``docs/plasticity.md``).
 
     See :class:`ContactProblem` and :meth:`ContactProblem.solve`. ``warm_start=True`` has no
     previous solve to start from here; pass a :class:`ContactState` or a contact mask.
     """
     problem = ContactProblem(
-        surface, E=E, nu=nu, boundary=boundary, dx=dx, memory_limit=memory_limit
+        surface,
+        E=E,
+        nu=nu,
+        boundary=boundary,
+        dx=dx,
+        memory_limit=memory_limit,
+        hardness=hardness,
     )
     return problem.solve(
         approach,

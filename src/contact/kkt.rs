@@ -87,6 +87,52 @@ pub fn kkt_certificate(pressure: &[f64], gap: &[f64], scale: f64) -> f64 {
     c / scale
 }
 
+/// The certificate of a capped state (`0 ≤ p ≤ hardness`, [`crate::contact::capped`]),
+/// relative to `scale`:
+///
+/// ```text
+/// kkt = max( max_{p=0} (−g)⁺,  max_{0<p<H} |g|,  max_{p=H} g⁺,  Σ_{0<p<H} p |g| / Σ p ) / s
+/// ```
+///
+/// Plastic points (`p = H`) may have any `g ≤ 0` (the plastic interpenetration). NaN on a
+/// non-finite gap. With `hardness = ∞` it is [`kkt_certificate`].
+pub fn kkt_certificate_capped(pressure: &[f64], gap: &[f64], hardness: f64, scale: f64) -> f64 {
+    let parts: Vec<(f64, f64, f64, usize)> = pressure
+        .par_chunks(CHUNK)
+        .zip(gap.par_chunks(CHUNK))
+        .map(|(pc, gc)| {
+            let (mut viol, mut sp, mut spg, mut bad) = (0.0f64, 0.0, 0.0, 0usize);
+            for (&p, &g) in pc.iter().zip(gc) {
+                if !g.is_finite() {
+                    bad += 1;
+                }
+                if p <= 0.0 {
+                    viol = viol.max(-g);
+                } else if p >= hardness {
+                    sp += p;
+                    viol = viol.max(g);
+                } else {
+                    sp += p;
+                    spg += p * g.abs();
+                    viol = viol.max(g.abs());
+                }
+            }
+            (viol, sp, spg, bad)
+        })
+        .collect();
+    let (viol, sp, spg, bad) = parts.iter().fold((0.0f64, 0.0, 0.0, 0usize), |a, b| {
+        (a.0.max(b.0), a.1 + b.1, a.2 + b.2, a.3 + b.3)
+    });
+    if bad > 0 {
+        return f64::NAN;
+    }
+    let mut c = viol;
+    if sp > 0.0 {
+        c = c.max(spg / sp);
+    }
+    c / scale
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -137,6 +183,25 @@ mod tests {
         let (p, g) = field(3 * CHUNK + 17, 9);
         let (a, b) = (kkt_certificate(&p, &g, 1.0), oracle(&p, &g, 1.0));
         assert!((a - b).abs() <= 1e-14 * b, "{a} {b}");
+    }
+
+    #[test]
+    fn capped_certificate_accepts_plastic_interpenetration_only() {
+        let p = [1.0, 0.0, 2.0, 0.5];
+        let g = [-0.3, 0.5, 0.0, 0.0];
+        assert_eq!(kkt_certificate_capped(&p, &g, 1.0, 1.0), 0.0);
+        // A plastic point with an open gap should unload.
+        assert_eq!(
+            kkt_certificate_capped(&p, &[0.2, 0.5, 0.0, 0.0], 1.0, 1.0),
+            0.2
+        );
+        // No cap: the elastic certificate.
+        let q = [1.0, 0.0, 2.0, 0.0];
+        let h = [0.0, 0.5, 0.0, 1e-3];
+        assert_eq!(
+            kkt_certificate_capped(&q, &h, f64::INFINITY, 1.0),
+            kkt_certificate(&q, &h, 1.0)
+        );
     }
 
     #[test]

@@ -312,6 +312,7 @@ impl<'a> LawsonHanson<'a> {
             chord_steps: 0,
             kkt,
             contact_points,
+            plastic_points: 0,
             load: sum_p * dx * dx,
             mean_pressure: sum_p / n as f64,
             coarse: CoarseCost::default(),

@@ -6,8 +6,10 @@
 //! [`lawson_hanson`] (Lawson–Hanson NNLS and its block active-set variant on the updatable
 //! Cholesky [`factor`] of the contact block); both report the [`kkt`] certificate. A cold
 //! Polonsky–Keer solve starts from the coarse-to-fine pressure of
-//! [`polonsky_keer`]'s coarse levels.
+//! [`polonsky_keer`]'s coarse levels. With a hardness `H` the pressure is capped at `p ≤ H`
+//! ([`capped`], elastic–perfectly-plastic contact).
 
+pub mod capped;
 pub mod factor;
 pub mod kkt;
 pub mod lawson_hanson;

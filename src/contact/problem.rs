@@ -65,8 +65,26 @@ impl Solver {
     }
 
     /// The solver that runs for `self` on a grid of `n_points` under `control` (the `auto`
-    /// policy); an exact solver under load control is refused.
-    pub fn resolve(self, n_points: usize, control: Control) -> Result<Solver> {
+    /// policy); an exact solver under load control, or with a finite `hardness`, is refused.
+    pub fn resolve(
+        self,
+        n_points: usize,
+        control: Control,
+        hardness: Option<f64>,
+    ) -> Result<Solver> {
+        if hardness.is_some_and(f64::is_finite) {
+            return match self {
+                Solver::Auto | Solver::PolonskyKeer => Ok(Solver::PolonskyKeer),
+                other => Err(Error::invalid(
+                    "solver",
+                    format!(
+                        "{:?} cannot cap the pressure at a hardness; use solver='auto' or \
+                         'polonsky-keer' with hardness=",
+                        other.name()
+                    ),
+                )),
+            };
+        }
         match (self, control) {
             (Solver::Auto, Control::MeanPressure(_)) => Ok(Solver::PolonskyKeer),
             (Solver::Auto, Control::Approach(_)) => Ok(if n_points <= AUTO_ACTIVE_SET_MAX_POINTS {
@@ -150,6 +168,10 @@ pub struct Options<'a> {
     /// Take chord steps while the contact set changes wholesale (displacement control, see
     /// the module documentation); `false` keeps every iteration a regular Polonsky–Keer step.
     pub chord_steps: bool,
+    /// Hardness `H`: cap the pressure at `p ≤ H` (elastic–perfectly-plastic contact, solved by
+    /// [`crate::contact::capped`]). `None` or `+∞`: the elastic problem, by the
+    /// Polonsky–Keer iteration unchanged. Polonsky–Keer only ([`Solver::resolve`]).
+    pub hardness: Option<f64>,
 }
 
 impl Default for Options<'_> {
@@ -162,6 +184,7 @@ impl Default for Options<'_> {
             precondition: true,
             coarse_start: true,
             chord_steps: true,
+            hardness: None,
         }
     }
 }
@@ -211,6 +234,8 @@ pub struct Solution {
     pub kkt: f64,
     /// Number of points with `p > 0`.
     pub contact_points: usize,
+    /// Number of points at the hardness, `p = H` (0 without a hardness).
+    pub plastic_points: usize,
     /// Total force `F = dx² Σ p`.
     pub load: f64,
     /// Mean pressure `p̄ = Σ p / N`.

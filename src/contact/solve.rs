@@ -9,6 +9,7 @@
 use std::sync::Arc;
 
 use crate::alloc;
+use crate::contact::capped;
 use crate::contact::factor::Factor;
 use crate::contact::lawson_hanson::{self as lh, LawsonHanson, Pivoting};
 use crate::contact::polonsky_keer as pk;
@@ -166,7 +167,7 @@ impl ContactProblem {
     ) -> Result<Solution> {
         let (ny, nx) = (self.op.ny, self.op.nx);
         let n = ny * nx;
-        let solver = solver.resolve(n, control)?;
+        let solver = solver.resolve(n, control, opts.hardness)?;
         match start {
             Start::Pressure(p) if p.len() != n => {
                 return Err(Error::invalid(
@@ -234,14 +235,25 @@ impl ContactProblem {
             memory_limit: Some(self.memory_limit),
             ..*opts
         };
-        pk::solve_with_kernel(
-            &self.op,
-            Some(&self.kernel.table),
-            &problem,
-            control,
-            &pk_opts,
-            initial_pressure,
-        )
+        if pk_opts.hardness.is_some_and(f64::is_finite) {
+            capped::solve_with_kernel(
+                &self.op,
+                Some(&self.kernel.table),
+                &problem,
+                control,
+                &pk_opts,
+                initial_pressure,
+            )
+        } else {
+            pk::solve_with_kernel(
+                &self.op,
+                Some(&self.kernel.table),
+                &problem,
+                control,
+                &pk_opts,
+                initial_pressure,
+            )
+        }
     }
 
     fn solve_exact(
@@ -579,16 +591,22 @@ mod tests {
     fn auto_policy_by_grid_size_and_control() {
         let a = Control::Approach(0.1);
         let m = Control::MeanPressure(0.1);
-        assert_eq!(Solver::Auto.resolve(32 * 32, a).unwrap(), Solver::ActiveSet);
         assert_eq!(
-            Solver::Auto.resolve(32 * 32 + 1, a).unwrap(),
+            Solver::Auto.resolve(32 * 32, a, None).unwrap(),
+            Solver::ActiveSet
+        );
+        assert_eq!(
+            Solver::Auto.resolve(32 * 32 + 1, a, None).unwrap(),
             Solver::PolonskyKeer
         );
-        assert_eq!(Solver::Auto.resolve(16, m).unwrap(), Solver::PolonskyKeer);
-        assert!(Solver::ActiveSet.resolve(16, m).is_err());
-        assert!(Solver::LawsonHanson.resolve(16, m).is_err());
         assert_eq!(
-            Solver::LawsonHanson.resolve(1 << 20, a).unwrap(),
+            Solver::Auto.resolve(16, m, None).unwrap(),
+            Solver::PolonskyKeer
+        );
+        assert!(Solver::ActiveSet.resolve(16, m, None).is_err());
+        assert!(Solver::LawsonHanson.resolve(16, m, None).is_err());
+        assert_eq!(
+            Solver::LawsonHanson.resolve(1 << 20, a, None).unwrap(),
             Solver::LawsonHanson
         );
         // Auto on a small grid runs the active set: the same numbers as asking for it.

@@ -82,6 +82,8 @@ pub(super) struct PySolution {
     #[pyo3(get)]
     contact_points: usize,
     #[pyo3(get)]
+    plastic_points: usize,
+    #[pyo3(get)]
     load: f64,
     #[pyo3(get)]
     mean_pressure: f64,
@@ -106,6 +108,7 @@ impl PySolution {
             chord_steps: s.chord_steps,
             kkt: s.kkt,
             contact_points: s.contact_points,
+            plastic_points: s.plastic_points,
             load: s.load,
             mean_pressure: s.mean_pressure,
             coarse: Py::new(py, PyCoarseCost::from(s.coarse))?,
@@ -260,11 +263,12 @@ impl ContactProblem {
     /// "polonsky-keer", "active-set", "lawson-hanson"). `start`: "cold" (p = 0), "previous"
     /// (this problem's last solve), "pressure" with `initial_pressure` or "set" with
     /// `contact_set` (flat indices). `precondition`, `coarse_start`, `chord_steps` tune
-    /// Polonsky–Keer (see `contact::Options`); the answer is the same minimiser.
+    /// Polonsky–Keer (see `contact::Options`); the answer is the same minimiser. `hardness`:
+    /// cap the pressure at `p ≤ H` (`contact::capped`; `None` or `inf`: elastic).
     #[pyo3(signature = (
         approach=None, mean_pressure=None, solver="auto", start="cold",
         initial_pressure=None, contact_set=None, tol=1e-12, max_iter=None, threads=None,
-        precondition=true, coarse_start=true, chord_steps=true
+        precondition=true, coarse_start=true, chord_steps=true, hardness=None
     ))]
     #[allow(clippy::too_many_arguments)]
     fn solve(
@@ -282,8 +286,12 @@ impl ContactProblem {
         precondition: bool,
         coarse_start: bool,
         chord_steps: bool,
+        hardness: Option<f64>,
     ) -> PyResult<PySolution> {
         let pool = pool_for(check_threads(threads)?)?;
+        if let Some(h) = hardness {
+            crate::contact::polonsky_keer::check_hardness(h).map_err(to_py)?;
+        }
         let control = match (approach, mean_pressure) {
             (Some(d), None) => Control::Approach(d),
             (None, Some(m)) => Control::MeanPressure(m),
@@ -372,6 +380,7 @@ impl ContactProblem {
                 precondition,
                 coarse_start,
                 chord_steps,
+                hardness,
                 ..Options::default()
             };
             let result = run_solve(&pool, n, || work.solve(control, solver, start, &opts));

@@ -187,6 +187,17 @@ _SUMMARY_COLUMNS: tuple[tuple[str, str], ...] = (
     ("K_star", "K*"),  # leakpath.leakage
 )
 
+#: The summary of a sweep with a hardness or an unloading branch (units in the labels).
+_PLASTIC_SUMMARY_COLUMNS: tuple[tuple[str, str], ...] = (
+    ("k", "k"),
+    ("branch", "branch"),
+    ("mean_pressure_star", "pbar/E*"),
+    ("contact_fraction", "contact"),
+    ("plastic_fraction", "plastic"),
+    ("plastic_volume", "V_pl[L^3]"),
+    ("K_star", "K*"),  # leakpath.leakage
+)
+
 def parse_surface_spec(text: str) -> tuple[str, dict[str, Any], int] | None:
     """:func:`leakpath.generators.parse_spec`: ``(generator, parameters, seed)`` or ``None``."""
     return parse_spec(text)
@@ -282,15 +293,21 @@ def _note(message: str) -> None:
     print(f"{PROG}: note: {_one_line(message)}", file=sys.stderr)
 
 
-def format_summary(rows: Sequence[dict[str, Any]]) -> str:
+def format_summary(
+    rows: Sequence[dict[str, Any]],
+    columns: Sequence[tuple[str, str]] = _SUMMARY_COLUMNS,
+) -> str:
     """The summary table: k, Δ*, contact fraction, V*, V_pg*, ḡ*, m0*, m2* (4 decimals)."""
-    header = [label for _, label in _SUMMARY_COLUMNS]
+    header = [label for _, label in columns]
     body = []
     for row in rows:
         cells = []
-        for key, _ in _SUMMARY_COLUMNS:
+        for key, _ in columns:
             v = row[key]
-            if key == "K_star":  # leakpath.leakage: spans decades
+            if isinstance(v, str):
+                cells.append(v)
+                continue
+            if key in ("K_star", "plastic_volume"):  # leakpath.leakage: spans decades
                 cells.append(f"{v:.3e}")
                 continue
             cells.append(str(v) if isinstance(v, int) else f"{v:.4f}")

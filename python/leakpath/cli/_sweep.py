@@ -13,6 +13,7 @@ from ..errors import InvalidArgumentError
 from ..experiments import PAPER, paper_surface
 from ..surfaces import FILL_METHODS, Surface
 from ._common import (
+    _PLASTIC_SUMMARY_COLUMNS,
     _SOLVER_HELP,
     _SUMMARY_COLUMNS,
     CHECKPOINT_DIR,
@@ -51,15 +52,31 @@ def _run_sweep(
     keep_fields: bool = False,
     mean_pressures: Sequence[float] | None = None,
     argv: Sequence[str] | None = None,
+    hardness: float | None = None,
+    unload: bool = False,
 ) -> int:
     """Run a sweep into ``args.out`` and print its summary (table or JSON)."""
     from .._checkpoint import CheckpointMismatch
     from .._sweep import _check_levels, _resolve_mean_pressures, sweep
-    from ..contact import contact_modulus
+    from ..contact import check_hardness, contact_modulus
 
     out: Path = args.out
     # Every option is checked before the output directory is touched or anything is solved.
     contact_modulus(E, nu)
+    try:
+        hardness = check_hardness(hardness)
+    except InvalidArgumentError as exc:
+        raise UsageError(f"--hardness: {str(exc).split(': ', 1)[-1]}") from None
+    if hardness is not None and args.solver in ("active-set", "lawson-hanson"):
+        raise UsageError(
+            f"--solver {args.solver} cannot cap the pressure at a hardness; use --solver auto "
+            "or polonsky-keer with --hardness"
+        )
+    if hardness is not None and mean_pressures and max(mean_pressures) > hardness:
+        raise UsageError(
+            f"--mean-pressures: {max(mean_pressures)!r} exceeds --hardness {hardness!r}; a "
+            "perfectly plastic surface carries at most the hardness"
+        )
     _check_levels(levels, surface.shape, keep_fields)
     n_rows = levels + 1
     if mean_pressures is not None:
@@ -89,6 +106,8 @@ def _run_sweep(
             keep_fields=keep_fields,
             progress=sys.stderr.isatty(),
             checkpoint_dir=out / CHECKPOINT_DIR,
+            hardness=hardness,
+            unload=unload,
             **leakage.sweep_flow_options(args),  # leakpath.leakage
         )
     except CheckpointMismatch as exc:
@@ -117,6 +136,10 @@ def _run_sweep(
     record.add(figures)
     figures += save_flow_figures(result, out / FIGURES_DIR, flux_levels=args.flux_maps)
     record.add(figures)
+    from ..plotting.plastic import save_plastic_figures
+
+    figures += save_plastic_figures(result, out / FIGURES_DIR)
+    record.add(figures)
     extra = {
         "command": command,
         "argv": list(argv) if argv is not None else sys.argv[1:],
@@ -128,7 +151,8 @@ def _run_sweep(
         },
     }
     record.add([result.to_json(files["metadata"], extra=extra)])
-    summary = [{key: row[key] for key, _ in _SUMMARY_COLUMNS} for row in result.rows]
+    columns = _PLASTIC_SUMMARY_COLUMNS if (hardness is not None or unload) else _SUMMARY_COLUMNS
+    summary = [{key: row[key] for key, _ in columns} for row in result.rows]
     if args.json:
         payload = {
             "command": command,
@@ -142,7 +166,7 @@ def _run_sweep(
         _print_json(payload, default=_json_number)
     else:
         print(description)
-        print(format_summary(summary))
+        print(format_summary(summary, columns))
         resumed = f" ({len(result.resumed)} levels from checkpoints)" if result.resumed else ""
         print(
             f"{len(result.rows)} levels in {result.total_seconds:.1f} s{resumed}; wrote "
@@ -250,6 +274,8 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
         connectivity=args.connectivity,
         keep_fields=args.keep_fields,
         mean_pressures=args.mean_pressures,
+        hardness=args.hardness,
+        unload=args.unload,
     )
 
 
@@ -319,6 +345,20 @@ def _add_sweep_parser(subparsers: Any) -> None:
         "--keep-fields",
         action="store_true",
         help="also write per-level pressure, gap and cluster labels to fields.npz",
+    )
+    p.add_argument(
+        "--hardness",
+        type=float,
+        default=None,
+        metavar="H",
+        help="cap the contact pressure at H (E's unit): elastic-perfectly-plastic contact "
+        "(docs/plasticity.md); adds the plastic columns",
+    )
+    p.add_argument(
+        "--unload",
+        action="store_true",
+        help="append an unloading branch (the loading rows in reverse, on the permanently "
+        "deformed surface of the last loading row); best with --mean-pressures",
     )
     leakage.add_flow_arguments(p)  # leakpath.leakage
     _add_sweep_output_arguments(p, "sweep-results")

@@ -26,8 +26,18 @@ from .paper import (
     save_figure,
     save_paper_figures,
 )
+from .plastic import (
+    figure_plastic_area,
+    figure_plastic_leak_rate,
+    plastic_figures,
+    save_plastic_figures,
+)
 
 __all__ = [
+    "figure_plastic_area",
+    "figure_plastic_leak_rate",
+    "plastic_figures",
+    "save_plastic_figures",
     "CLASS_COLOURS",
     "CLASS_NAMES",
     "default_map_levels",

@@ -114,15 +114,25 @@ def level_flow(result: SweepResult, k: int) -> Flow:
 
     par = result.parameters
     prob = ContactProblem(
-        result.surface, E=par.get("E", 1.0), nu=par.get("nu", 0.0), boundary=par["boundary"]
+        result.surface,
+        E=par.get("E", 1.0),
+        nu=par.get("nu", 0.0),
+        boundary=par["boundary"],
+        hardness=par.get("hardness"),
     )
     row = result.rows[k]
     solver = par.get("solver", "auto")
-    if par.get("mean_pressures"):
-        state = prob.solve(mean_pressure=row["mean_pressure"], solver=solver)
-    else:
-        state = prob.solve(row["approach"], solver=solver)
-    return flow(state, axis=axis)
+
+    def solve_row(problem: ContactProblem, r: dict[str, Any]) -> Any:
+        if par.get("mean_pressures"):
+            return problem.solve(mean_pressure=r["mean_pressure"], solver=solver)
+        return problem.solve(r["approach"], solver=solver)
+
+    if row.get("branch") == "unloading":
+        # The unloading rows are solved on the permanent surface of the last loading row.
+        top = max(i for i, r in enumerate(result.rows) if r.get("branch") == "loading")
+        prob = prob.unloading(solve_row(prob, result.rows[top]))
+    return flow(solve_row(prob, row), axis=axis)
 
 
 def plot_flux_map(

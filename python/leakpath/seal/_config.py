@@ -20,7 +20,7 @@ TOML structure (``docs/seal.md`` lists every key with its unit and default)::
     short_wavelength = 4e-6             # m
     # ... or files = ["a.npy", ...] with dx (m), or psd = "psd.txt" (q [rad/m], C [m^4])
     [material.upper]                    # E [Pa], nu [-]
-    [material.lower]
+    [material.lower]                    # optional: hardness [Pa] (pressure cap, plasticity)
     [load]
     mean_pressure = [1e5, 1e6]          # Pa, nominal contact pressures
     [fluid]
@@ -84,6 +84,7 @@ UNITS: dict[str, str] = {
     "surface.*.psd": "file: q [rad/m], C(q) [m^4]",
     "material.*.E": "Pa",
     "material.*.nu": "1",
+    "material.*.hardness": "Pa",
     "load.mean_pressure": "Pa",
     "fluid.viscosity": "Pa s",
     "fluid.pressure_drop": "Pa",
@@ -236,17 +237,25 @@ class BodySurface:
 @dataclass(frozen=True)
 class BodyMaterial:
     """One elastic body: Young's modulus ``E`` [Pa] (``inf``: rigid) and Poisson's ratio
-    ``nu`` (−1 < ν ≤ 0.5)."""
+    ``nu`` (−1 < ν ≤ 0.5); optionally its ``hardness`` [Pa], where it yields (perfectly
+    plastic: the contact pressure is capped at the smaller hardness of the two bodies,
+    ``docs/plasticity.md``)."""
 
     E: float  # noqa: N815 - Young's modulus
     nu: float
+    hardness: float | None = None
 
     def check(self, name: str) -> BodyMaterial:
         E = _modulus(f"{name}.E", self.E)  # noqa: N806
         nu = _real(f"{name}.nu", self.nu, low=-1.0, high=0.5)
         if nu == -1.0:
             raise _fail(f"{name}.nu", "must be > -1")
-        return BodyMaterial(E, nu)
+        hardness = self.hardness
+        if hardness is not None:
+            hardness = _real(f"{name}.hardness", hardness, positive=True)
+            if not math.isfinite(hardness):
+                raise _fail(f"{name}.hardness", "must be finite (omit it for no cap)")
+        return BodyMaterial(E, nu, hardness)
 
 
 @dataclass(frozen=True)
@@ -348,6 +357,13 @@ class SealConfig:
     check: ConvergenceCheck = field(default_factory=ConvergenceCheck)
     strict: bool = False
 
+    @property
+    def hardness(self) -> float | None:
+        """The pressure cap [Pa]: the smaller hardness of the two bodies (``None``: elastic)."""
+        given = [m.hardness for m in (self.upper_material, self.lower_material)
+                 if m.hardness is not None]
+        return min(given) if given else None
+
     def __post_init__(self) -> None:
         set_ = object.__setattr__
         for name, cls in (("upper", BodySurface), ("lower", BodySurface)):
@@ -370,6 +386,14 @@ class SealConfig:
         if len(set(p)) != len(p):
             raise _fail("load.mean_pressure", f"values must be distinct, got {list(p)}")
         set_(self, "mean_pressure", tuple(sorted(p)))
+        h = self.hardness
+        if h is not None and p and max(p) > h:
+            side = "lower" if self.lower_material.hardness == h else "upper"
+            raise _fail(
+                f"material.{side}.hardness",
+                f"{h!r} Pa is below the largest load.mean_pressure {max(p)!r} Pa; a perfectly "
+                "plastic surface carries at most the hardness",
+            )
         if not isinstance(self.fluid, Fluid):
             raise _fail("fluid", "must be a Fluid")
         set_(self, "fluid", self.fluid.check())
@@ -459,8 +483,12 @@ class SealConfig:
             "strict": self.strict,
             "surface": surface,
             "material": {
-                "upper": {"E": self.upper_material.E, "nu": self.upper_material.nu},
-                "lower": {"E": self.lower_material.E, "nu": self.lower_material.nu},
+                side: {
+                    "E": m.E,
+                    "nu": m.nu,
+                    **({} if m.hardness is None else {"hardness": m.hardness}),
+                }
+                for side, m in (("upper", self.upper_material), ("lower", self.lower_material))
             },
             "load": {"mean_pressure": list(self.mean_pressure)},
             "fluid": fluid,
@@ -554,11 +582,11 @@ def _from_dict(data: Mapping[str, Any], base: Path | None) -> SealConfig:
         if side not in material:
             raise _fail(f"material.{side}", "missing (E [Pa], nu)")
         m = _table(f"material.{side}", material[side])
-        _unknown(f"material.{side}", m, {"E", "nu"})
+        _unknown(f"material.{side}", m, {"E", "nu", "hardness"})
         for k in ("E", "nu"):
             if k not in m:
                 raise _fail(f"material.{side}.{k}", "required")
-        mats[side] = BodyMaterial(m["E"], m["nu"])
+        mats[side] = BodyMaterial(m["E"], m["nu"], m.get("hardness"))
     load = _table("load", data["load"])
     _unknown("load", load, {"mean_pressure"})
     if "mean_pressure" not in load:

@@ -87,6 +87,7 @@ class _Task:
     e_star: float
     rms_slope: float
     boundary: str
+    hardness: float | None = None
 
     @property
     def name(self) -> str:
@@ -118,7 +119,9 @@ def _run_task(task: _Task) -> _Output:
         task.upper, task.lower, task.patch, realisation=task.realisation, seed=task.seed,
         refine=task.refine,
     )
-    problem = ContactProblem(surface, E=task.e_star, nu=0.0, boundary=task.boundary)
+    problem = ContactProblem(
+        surface, E=task.e_star, nu=0.0, boundary=task.boundary, hardness=task.hardness
+    )
     state = None
     rows: list[dict[str, Any]] = []
     for p in task.pressures:
@@ -508,7 +511,7 @@ def seal_leakage(
 
     common = dict(upper=upper, lower=lower, patch=patch, seed=cfg.seed,
                   pressures=cfg.mean_pressure, axes=cfg.axes, e_star=e_star,
-                  rms_slope=rms_slope, boundary=cfg.boundary)
+                  rms_slope=rms_slope, boundary=cfg.boundary, hardness=cfg.hardness)
     tasks = [_Task("main", k, 1, **common) for k in range(cfg.realisations)]
     tasks += [_Task("check", k, cfg.check.refine, **common)
               for k in range(cfg.check.realisations)]

@@ -129,6 +129,7 @@ pub fn start(
         precondition: opts.precondition,
         coarse_start: true,
         chord_steps: opts.chord_steps,
+        hardness: opts.hardness,
     };
     // Only the coarse pressure is used: no confirming product at the end of a coarse level.
     let sol = solve_coarse(&coarse, coarse_control, &copts, levels - 1)?;

@@ -439,6 +439,7 @@ pub(super) fn run(
         chord_steps,
         kkt,
         contact_points: state.n_c,
+        plastic_points: 0,
         load: sum_p * problem.dx * problem.dx,
         mean_pressure: sum_p / n as f64,
         coarse: CoarseCost::default(),

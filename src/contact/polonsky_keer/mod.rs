@@ -164,7 +164,7 @@
 //! partial results sequentially in chunk order, and the operator is deterministic, so results
 //! do not depend on the number of rayon threads.
 
-mod coarse;
+pub mod coarse;
 mod driver;
 mod passes;
 mod sparse;
@@ -176,7 +176,9 @@ use std::time::Duration;
 
 pub use coarse::{COARSE_START_MIN_SIDE, COARSE_TOL, MAX_COARSE_LEVELS};
 use driver::{run, Begin};
-use validate::validate;
+pub(crate) use sparse::add_sparse;
+pub use validate::check_hardness;
+pub(crate) use validate::validate;
 
 pub use crate::contact::problem::{CoarseCost, Control, Options, Problem, Solution, DEFAULT_TOL};
 use crate::elastic::kernel::Kernel;
@@ -289,21 +291,9 @@ pub(crate) fn solve_level(
     finish: Finish,
     levels: usize,
 ) -> Result<Solution> {
-    validate(problem, control, opts, initial)?;
+    validate_elastic(problem, control, opts, initial)?;
     let (ny, nx) = (problem.ny, problem.nx);
-    if let Some(limit) = opts.memory_limit {
-        let bytes = memory::polonsky_keer(ny, nx, problem.boundary);
-        if bytes > limit {
-            return Err(Error::TooLarge {
-                bytes,
-                limit,
-                what: format!(
-                    "Polonsky–Keer on a {ny} × {nx} {} grid",
-                    boundary_name(problem.boundary)
-                ),
-            });
-        }
-    }
+    check_memory(problem, opts)?;
     // The coarse levels run before the fine operator exists, so their memory is not added
     // to its.
     let start = (
@@ -400,7 +390,59 @@ pub fn solve_with_kernel(
     opts: &Options,
     initial: Option<&[f64]>,
 ) -> Result<Solution> {
+    validate_elastic(problem, control, opts, initial)?;
+    check_operator(op, table, problem)?;
+    let start = (
+        initial,
+        coarse_start(problem, control, opts, initial, MAX_COARSE_LEVELS)?,
+    );
+    run_from(op, table, problem, control, opts, start, Finish::Confirmed)
+}
+
+/// The inputs, and no finite hardness: the capped problem is [`crate::contact::capped`]'s.
+fn validate_elastic(
+    problem: &Problem,
+    control: Control,
+    opts: &Options,
+    initial: Option<&[f64]>,
+) -> Result<()> {
     validate(problem, control, opts, initial)?;
+    if opts.hardness.is_some_and(f64::is_finite) {
+        return Err(Error::invalid(
+            "hardness",
+            "the elastic Polonsky–Keer iteration takes no finite hardness; capped solves are \
+             contact::capped's",
+        ));
+    }
+    Ok(())
+}
+
+/// [`Error::TooLarge`] when [`memory::polonsky_keer`] exceeds the options' memory limit.
+pub(crate) fn check_memory(problem: &Problem, opts: &Options) -> Result<()> {
+    let (ny, nx) = (problem.ny, problem.nx);
+    if let Some(limit) = opts.memory_limit {
+        let bytes = memory::polonsky_keer(ny, nx, problem.boundary);
+        if bytes > limit {
+            return Err(Error::TooLarge {
+                bytes,
+                limit,
+                what: format!(
+                    "Polonsky–Keer on a {ny} × {nx} {} grid",
+                    boundary_name(problem.boundary)
+                ),
+            });
+        }
+    }
+    Ok(())
+}
+
+/// The caller's operator and influence table fit `problem` (shape and boundary; `dx` and
+/// `E*` are trusted).
+pub(crate) fn check_operator(
+    op: &Operator,
+    table: Option<&[f64]>,
+    problem: &Problem,
+) -> Result<()> {
     if let Some(t) = table {
         if t.len() != problem.ny * problem.nx {
             return Err(Error::invalid(
@@ -428,11 +470,7 @@ pub fn solve_with_kernel(
             ),
         ));
     }
-    let start = (
-        initial,
-        coarse_start(problem, control, opts, initial, MAX_COARSE_LEVELS)?,
-    );
-    run_from(op, table, problem, control, opts, start, Finish::Confirmed)
+    Ok(())
 }
 
 pub(super) fn boundary_name(b: Boundary) -> &'static str {

@@ -104,7 +104,7 @@ impl Work<'_> {
 /// `lo`, with `C` given by the table of [`Work::table`]. Each row segment is split where the
 /// table index wraps or reflects so the inner loops run over contiguous slices; every element
 /// adds the changes in their (index) order, whatever the thread count.
-pub(super) fn add_sparse(
+pub(crate) fn add_sparse(
     out: &mut [f64],
     lo: usize,
     changes: &[(usize, f64)],

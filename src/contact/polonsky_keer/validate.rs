@@ -6,7 +6,7 @@ use super::{Control, Options, Problem};
 use crate::error::{Error, Result};
 use crate::grid::check_shape;
 
-pub(super) fn validate(
+pub(crate) fn validate(
     problem: &Problem,
     control: Control,
     opts: &Options,
@@ -53,6 +53,20 @@ pub(super) fn validate(
         }
         _ => {}
     }
+    if let Some(cap) = opts.hardness {
+        check_hardness(cap)?;
+        if let Control::MeanPressure(m) = control {
+            if m > cap {
+                return Err(Error::invalid(
+                    "mean_pressure",
+                    format!(
+                        "{m} exceeds the hardness {cap}: a perfectly plastic surface carries \
+                         at most p̄ = hardness (every point at the hardness)"
+                    ),
+                ));
+            }
+        }
+    }
     if !(opts.tol.is_finite() && opts.tol > 0.0) {
         return Err(Error::invalid(
             "tol",
@@ -97,4 +111,15 @@ pub(super) fn validate(
 
 fn first_non_finite(v: &[f64]) -> Option<usize> {
     v.par_iter().position_first(|x| !x.is_finite())
+}
+
+/// Reject a hardness that is not a positive number (`+∞` is accepted: no cap).
+pub fn check_hardness(hardness: f64) -> Result<()> {
+    if hardness.is_nan() || hardness <= 0.0 {
+        return Err(Error::invalid(
+            "hardness",
+            format!("must be a positive number (or None / inf for no cap), got {hardness}"),
+        ));
+    }
+    Ok(())
 }
