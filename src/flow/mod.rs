@@ -161,13 +161,30 @@ pub struct Solution {
     pub solver: &'static str,
 }
 
-/// Bytes a solve of `cells` cells needs (inputs not counted).
+/// Bytes a solve of `cells` cells needs beside its linear solver (inputs not counted).
 pub fn memory_estimate(cells: usize) -> u64 {
     let c = cells as u64;
     // transposed inputs 9, labels 4, open mask 1, conductance 8, fine operator 33, two
-    // right-hand sides 16, CG vectors φ, ψ, r, z, p, q and the cycle's work vector 56,
+    // right-hand sides 16, vectors φ, ψ and the refinement's and CG's r, δ, r, z, p, q 64,
     // outputs pressure + two fluxes 24.
-    c * (9 + 4 + 1 + 8 + 33 + 16 + 56 + 24) + multigrid::memory_estimate(cells)
+    c * (9 + 4 + 1 + 8 + 33 + 16 + 64 + 24)
+}
+
+/// Bytes of a multigrid solve of `cells` cells of which `unknowns` carry unknowns.
+pub fn multigrid_estimate(cells: usize, unknowns: usize) -> u64 {
+    memory_estimate(cells) + multigrid::memory_estimate(unknowns)
+}
+
+/// Entries per unknown below which a sparse Cholesky factor of a contact gap's spanning
+/// cells is not expected: about 25 at 1025², 65 at 4097² (10 million unknowns); the fill of
+/// a nested 2-D order grows with the size.
+fn factor_entries_lower_bound(unknowns: usize) -> u64 {
+    let m = unknowns as u64;
+    if m >= 8_000_000 {
+        60 * m
+    } else {
+        20 * m
+    }
 }
 
 fn validate(pr: &Problem<'_>, opts: &Options<'_>) -> Result<()> {
@@ -267,8 +284,9 @@ pub fn solve(pr: &Problem<'_>, opts: &Options<'_>) -> Result<Solution> {
     validate(pr, opts)?;
     let cells = pr.ny * pr.nx;
     if let Some(limit) = opts.memory_limit {
-        // `Auto` needs the multigrid's memory at least; the factor is checked exactly
-        // after its symbolic analysis.
+        // Before the labelling only the cells are known: the rest of the solve, and the
+        // factor's rough estimate when it is asked for. The multigrid's hierarchy is checked
+        // once the unknowns are counted, the factor exactly after its symbolic analysis.
         let factor = match opts.solver {
             Solver::Cholesky => cholesky_estimate(cells),
             _ => 0,
@@ -567,7 +585,7 @@ fn solve_axis0(
     let mut levels = 0;
     // Room for the factor: what the limits leave beside the rest of the solve.
     let factor_room = {
-        let base = memory_estimate(n);
+        let base = multigrid_estimate(n, n_unknowns);
         let room = |l: u64| l.saturating_sub(base);
         match (opts.memory_limit, available_memory()) {
             (Some(l), Some(a)) => Some(room(l).min(room(a))),
@@ -578,7 +596,11 @@ fn solve_axis0(
     };
     // `Some(Ok)`: a factor; `Some(Err)`: the factor broke down (a non-positive pivot of the
     // rounded matrix); `None`: no factor (multigrid, or too large for `Auto`).
-    let factor = if n_unknowns == 0 || opts.solver == Solver::Multigrid {
+    // `Auto` skips the symbolic analysis (itself costly on large grids) when even the
+    // factor's lower bound does not fit.
+    let hopeless = opts.solver == Solver::Auto
+        && factor_room.is_some_and(|r| 16 * factor_entries_lower_bound(n_unknowns) > r);
+    let factor = if n_unknowns == 0 || opts.solver == Solver::Multigrid || hopeless {
         None
     } else {
         match direct::Factor::new(&fine, factor_room) {
@@ -608,6 +630,18 @@ fn solve_axis0(
         };
         (fine, x, psi, residual, "cholesky")
     } else {
+        let need = multigrid_estimate(n, n_unknowns);
+        if let Some(limit) = opts.memory_limit {
+            if need > limit {
+                return Err(Error::TooLarge {
+                    bytes: need,
+                    limit,
+                    what: format!(
+                        "Reynolds flow on {ny} × {nx} by multigrid ({n_unknowns} unknowns)"
+                    ),
+                });
+            }
+        }
         let mg = Multigrid::new(fine);
         levels = mg.n_levels();
         let (x, psi, residual, it) = solve_multigrid(&mg, &rhs, &b_out, opts, max_iter)??;
@@ -898,9 +932,9 @@ fn rate_error(x: &[f64], r: &[f64]) -> f64 {
     parts.iter().sum()
 }
 
-/// `φ` and `ψ` by multigrid-preconditioned CG, each until its relative residual is `≤ tol`
-/// and its flow rate is accurate to `10 tol` (estimated from the true residual by
-/// [`rate_error`]); then the inlet and outlet rates must agree to [`FLUX_AGREEMENT`]. The
+/// `φ` and `ψ` by multigrid-preconditioned CG with iterative refinement ([`cg::refined`]),
+/// each until its relative residual is `≤ tol` and its flow rate is accurate to `tol`
+/// (estimated from the exact residual by [`rate_error`]); then the inlet and outlet rates must agree to [`FLUX_AGREEMENT`]. The
 /// inner `Err` is the failure to report (or to recover from with the direct solver).
 type MultigridOk = (Vec<f64>, Vec<f64>, f64, usize);
 fn solve_multigrid(
@@ -913,15 +947,16 @@ fn solve_multigrid(
     let n = b_in.len();
     let st = mg.fine();
     let qtol = opts.tol;
-    let mut work = vec![0.0; n];
     let apply = |v: &[f64], out: &mut [f64]| st.apply(v, out);
-    let mut pre = |r: &[f64], z: &mut [f64]| mg.apply(r, z, &mut work);
+    let mut pre = |r: &[f64], z: &mut [f64]| mg.apply(r, z);
     fn accurate(w: &[f64], qtol: f64) -> impl Fn(&[f64], &[f64]) -> f64 + '_ {
         move |x: &[f64], r: &[f64]| rate_error(x, r).abs() / (qtol * cg::dot(w, x).abs())
     }
     let mut x = vec![0.0; n];
-    let a = cg::pcg(
+    let exact = |x: &[f64], b: &[f64], r: &mut [f64]| st.residual_compensated(x, b, r);
+    let a = cg::refined(
         &apply,
+        &exact,
         &mut pre,
         &accurate(b_out, qtol),
         b_in,
@@ -944,8 +979,9 @@ fn solve_multigrid(
         .zip(st.active.par_iter())
         .map(|(&v, &on)| if on { 1.0 - v } else { 0.0 })
         .collect();
-    let b = cg::pcg(
+    let b = cg::refined(
         &apply,
+        &exact,
         &mut pre,
         &accurate(b_in, qtol),
         b_out,
