@@ -78,8 +78,9 @@ def main() -> None:
     ap.add_argument("--cache", type=Path, default=Path("/tmp/lp_gaps"))
     ap.add_argument("--out", type=Path, default=Path("benchmarks/results/flow_amg.md"))
     a = ap.parse_args()
-    import leakpath
     import numpy as np
+
+    import leakpath
 
     lines = [
         "",

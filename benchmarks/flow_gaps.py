@@ -1,16 +1,18 @@
-"""Contact gaps for the flow-solver benchmarks, cached as ``.npy`` under ``--cache``.
+"""Contact gaps for the flow-solver benchmarks, cached as ``.npz`` under ``--cache``.
 
 Each gap is the gap of ``leakpath.solve(surface, Δ, boundary="periodic")`` on a periodic
 spectral surface (H = 0.8, rms height 1, seed 0) or, with ``--kind rmd``, a free-boundary
 random-midpoint-displacement surface (``leakpath.rmd(m, D=2.2, seed=0)``, ``2^m + 1``
-points a side). ``--kind synthetic`` skips the contact solve (minutes from 4097² on): the
-gap ``max(t − h, 0)`` of the spectral surface with ``t`` at its percolation threshold. The flat sits ``--separation`` times the separation ``s_c`` from the mean
+points a side). The flat sits ``--separation`` times the separation ``s_c`` from the mean
 plane at the percolation threshold of the same statistics at 513²
 (``leakpath.percolation_threshold``): ``Δ = max h − mean h − separation·s_c``. The
-default 1.01 gives near-threshold gaps (the free region barely spans: a tortuous channel),
-larger factors moderate contact; ``--separation 0`` takes this surface's own threshold
-(``leakpath.percolation_threshold`` to ``10⁻³ h_s``, its last spanning state). If the gap at the target size does not span along axis 0,
-the separation grows by 0.5 % steps until it does.
+default 1.01 gives near-threshold gaps at 513² (the free region barely spans: a tortuous
+channel), larger factors moderate contact; ``--separation 0`` takes this surface's own
+threshold (``leakpath.percolation_threshold`` to ``10⁻³ h_s``, its last spanning state).
+If the gap at the target size does not span along axis 0, the separation grows by 0.5 %
+steps until it does. ``--kind synthetic`` skips the contact solve (minutes from 4097²
+on): the gap ``max(t − h, 0)`` of the spectral surface with ``t`` at its percolation
+threshold.
 
     python benchmarks/flow_gaps.py --sizes 513 1025 --separation 1.01
 """
@@ -74,7 +76,8 @@ def synthetic(n: int) -> tuple[np.ndarray, np.ndarray, dict]:
 
 def gap(kind: str, n: int, separation: float, cache: Path):
     """(gap, contact, periodic, info) for the flow, from the cache when present."""
-    npz, js = cache / f"{kind}_{n}_{separation:g}.npz", cache / f"{kind}_{n}_{separation:g}.json"
+    stem = f"{kind}_{n}_{separation:g}"
+    npz, js = cache / f"{stem}.npz", cache / f"{stem}.json"
     if npz.exists():
         d = np.load(npz)
         info = json.loads(js.read_text())
@@ -90,7 +93,9 @@ def gap(kind: str, n: int, separation: float, cache: Path):
     t0 = time.perf_counter()
     if separation == 0:
         # At the threshold of this surface: the last spanning state of the bisection.
-        th = leakpath.percolation_threshold(s, boundary=boundary(kind), atol=1e-3 * s.height_range)
+        th = leakpath.percolation_threshold(
+            s, boundary=boundary(kind), atol=1e-3 * s.height_range
+        )
         st = th.below
         sep = full(s) - st.approach
         delta = st.approach

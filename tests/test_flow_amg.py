@@ -8,10 +8,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from test_flow_solver import oracle_rate
 
 import leakpath
-
-from test_flow_solver import oracle_rate
 
 
 @pytest.fixture(scope="module")

@@ -613,21 +613,29 @@ fn solve_axis0(
     // `lo`: the parts of φ and ψ below the last digit of `x` and `psi` (the elimination's
     // refinement; empty otherwise).
     let mut lo = (Vec::new(), Vec::new());
+    // The factor's answer when it passes its checks; else the cancellation-free elimination,
+    // or with `Auto` beyond the elimination's size the multigrid (`None`).
+    let direct_answer = match factor {
+        None => None,
+        Some(f) => {
+            let trusted = f.ok().and_then(|mut f| {
+                let (x, psi, residual) = solve_direct(&mut f, &fine, &rhs, &b_out);
+                trusted(&fine, &rhs, &b_out, &x, &psi).then_some((x, psi, residual))
+            });
+            match trusted {
+                Some(t) => Some(t),
+                None if opts.solver == Solver::Auto && n_unknowns > gth::MAX_UNKNOWNS => None,
+                None => {
+                    let (x, psi, residual, split) = solve_gth(&fine, &rhs, &b_out, factor_room)?;
+                    lo = split;
+                    Some((x, psi, residual))
+                }
+            }
+        }
+    };
     let (st, x, psi, residual, solver) = if n_unknowns == 0 {
         (fine, vec![0.0; n], vec![0.0; n], 0.0, "none")
-    } else if let Some(f) = factor {
-        let trusted = f.ok().and_then(|mut f| {
-            let (x, psi, residual) = solve_direct(&mut f, &fine, &rhs, &b_out);
-            trusted(&fine, &rhs, &b_out, &x, &psi).then_some((x, psi, residual))
-        });
-        let (x, psi, residual) = match trusted {
-            Some(t) => t,
-            None => {
-                let (x, psi, residual, split) = solve_gth(&fine, &rhs, &b_out, factor_room)?;
-                lo = split;
-                (x, psi, residual)
-            }
-        };
+    } else if let Some((x, psi, residual)) = direct_answer {
         (fine, x, psi, residual, "cholesky")
     } else {
         let need = multigrid_estimate(n, n_unknowns);
@@ -949,8 +957,27 @@ fn solve_multigrid(
     let qtol = opts.tol;
     let apply = |v: &[f64], out: &mut [f64]| st.apply(v, out);
     let mut pre = |r: &[f64], z: &mut [f64]| mg.apply(r, z);
-    fn accurate(w: &[f64], qtol: f64) -> impl Fn(&[f64], &[f64]) -> f64 + '_ {
-        move |x: &[f64], r: &[f64]| rate_error(x, r).abs() / (qtol * cg::dot(w, x).abs())
+    // The rate's first-order error at most `tol` of it, and the pressure change a Jacobi step
+    // would make, `max |r_k| / d_k`, at most `tol` (a dead end behind a narrow face has a
+    // small residual for a large pressure error).
+    fn accurate<'a>(
+        st: &'a assemble::Stencil,
+        w: &'a [f64],
+        qtol: f64,
+    ) -> impl Fn(&[f64], &[f64]) -> f64 + 'a {
+        move |x: &[f64], r: &[f64]| {
+            let jacobi = r
+                .par_chunks(cg::CHUNK)
+                .zip(st.d.par_chunks(cg::CHUNK))
+                .map(|(rc, dc)| {
+                    rc.iter()
+                        .zip(dc)
+                        .fold(0.0, |m: f64, (rv, dv)| m.max(rv.abs() / dv))
+                })
+                .reduce(|| 0.0, f64::max);
+            let rate = rate_error(x, r).abs() / (qtol * cg::dot(w, x).abs());
+            rate.max(jacobi / qtol)
+        }
     }
     let mut x = vec![0.0; n];
     let exact = |x: &[f64], b: &[f64], r: &mut [f64]| st.residual_compensated(x, b, r);
@@ -958,7 +985,7 @@ fn solve_multigrid(
         &apply,
         &exact,
         &mut pre,
-        &accurate(b_out, qtol),
+        &accurate(st, b_out, qtol),
         b_in,
         &mut x,
         opts.tol,
@@ -983,7 +1010,7 @@ fn solve_multigrid(
         &apply,
         &exact,
         &mut pre,
-        &accurate(b_in, qtol),
+        &accurate(st, b_in, qtol),
         b_out,
         &mut psi,
         opts.tol,

@@ -266,7 +266,11 @@ fn strongest(g: &Graph) -> Vec<f64> {
     (0..g.n)
         .into_par_iter()
         .with_min_len(CHUNK)
-        .map(|i| g.w[g.ptr[i]..g.ptr[i + 1]].iter().fold(0.0, |m: f64, &w| m.max(w)))
+        .map(|i| {
+            g.w[g.ptr[i]..g.ptr[i + 1]]
+                .iter()
+                .fold(0.0, |m: f64, &w| m.max(w))
+        })
         .collect()
 }
 
@@ -761,16 +765,20 @@ fn vcycle(levels: &[Graph], interps: &[Interp], bufs: &mut [Buffers], coarse: &D
     g.residual(x, b, r);
     {
         let below = &mut rest[0];
-        below.b.par_chunks_mut(CHUNK).enumerate().for_each(|(blk, bc)| {
-            for (t, bv) in bc.iter_mut().enumerate() {
-                let c = blk * CHUNK + t;
-                let mut s = 0.0;
-                for q in ip.tptr[c]..ip.tptr[c + 1] {
-                    s += ip.tval[q] * r[ip.trow[q] as usize];
+        below
+            .b
+            .par_chunks_mut(CHUNK)
+            .enumerate()
+            .for_each(|(blk, bc)| {
+                for (t, bv) in bc.iter_mut().enumerate() {
+                    let c = blk * CHUNK + t;
+                    let mut s = 0.0;
+                    for q in ip.tptr[c]..ip.tptr[c + 1] {
+                        s += ip.tval[q] * r[ip.trow[q] as usize];
+                    }
+                    *bv = s;
                 }
-                *bv = s;
-            }
-        });
+            });
     }
     vcycle(&levels[1..], &interps[1..], rest, coarse);
     let xc = &rest[0].x;
@@ -815,11 +823,7 @@ impl DenseCholesky {
                     // SPD by construction; a pivot lost to round-off (a coarse unknown joined
                     // to the rest and the reservoirs by faces below ε of its own) solves as
                     // decoupled.
-                    let piv = if v > f64::EPSILON * g.d[k] {
-                        v
-                    } else {
-                        g.d[k]
-                    };
+                    let piv = if v > f64::EPSILON * g.d[k] { v } else { g.d[k] };
                     l[k * n + k] = piv.sqrt();
                 } else {
                     l[k * n + m] = v / l[m * n + m];
