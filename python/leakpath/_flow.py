@@ -257,12 +257,13 @@ def flow(
         max_iter: conjugate-gradient iterations allowed (default 20000).
         memory_limit: bytes allowed, a positive integer (default: what this process may
             still allocate, :func:`leakpath._memory.memory_limit`).
-        solver: ``"cholesky"`` (sparse Cholesky, refined with double-double residuals: exact to
-            round-off even for the near-threshold gaps where iterations stall),
-            ``"multigrid"`` (conjugate gradients, aggregation-multigrid preconditioner, to
-            ``tol``), or ``"auto"`` (default: Cholesky whenever its factor, whose exact size
-            is known after the symbolic analysis, fits in ``memory_limit`` and the available
-            memory; multigrid otherwise).
+        solver: ``"cholesky"`` (sparse Cholesky, refined with double-double residuals),
+            ``"multigrid"`` (conjugate gradients preconditioned by classical algebraic
+            multigrid, refined on exact residuals until the residual, the rate's error and
+            the Jacobi pressure change are below ``tol``; memory linear in the grid), or
+            ``"auto"`` (default: Cholesky whenever its factor, whose exact size is known
+            after the symbolic analysis, fits in ``memory_limit`` and the available memory;
+            multigrid otherwise, docs/flow.md).
         gas: isothermal ideal gas instead of an incompressible liquid (module docstring);
             needs ``inlet_pressure`` and ``outlet_pressure`` (absolute, ``≥ 0``),
             ``gas_constant`` ``R_s`` (specific, e.g. 287.05 J/(kg K) for air) and

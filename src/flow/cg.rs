@@ -50,16 +50,17 @@ const STALL: usize = 20;
 /// `10⁻⁹` at the default tolerance), and the caller checks the result independently.
 const STALL_ACCEPT: f64 = 1e3;
 
-/// `r = b − A x`.
-fn true_residual(apply: &dyn Fn(&[f64], &mut [f64]), b: &[f64], x: &[f64], r: &mut [f64]) {
-    apply(x, r);
-    r.par_chunks_mut(CHUNK)
-        .zip(b.par_chunks(CHUNK))
-        .for_each(|(rc, bc)| rc.iter_mut().zip(bc).for_each(|(rv, bv)| *rv = bv - *rv));
+/// `r = b − A x` from `residual(x, b, r)`.
+fn true_residual(residual: Residual<'_>, b: &[f64], x: &[f64], r: &mut [f64]) {
+    residual(x, b, r);
 }
 
+/// `residual(x, b, r)` sets `r = b − A x` (e.g. summed exactly, so that it is not swamped by
+/// the rounding of `A x` where the conductances are large).
+pub type Residual<'a> = &'a dyn Fn(&[f64], &[f64], &mut [f64]);
+
 /// Solves `A x = b` from the initial guess in `x`, with preconditioner `precond(r, z)`,
-/// until the *true* residual `r = b − A x` has `‖r‖₂ ≤ tol ‖b‖₂` and `measure(x, r) ≤ 1`
+/// until the *true* residual `r = b − A x` (recomputed by `residual`) has `‖r‖₂ ≤ tol ‖b‖₂` and `measure(x, r) ≤ 1`
 /// (a caller's test, e.g. on the error of a flux). The recurrence residual only decides when
 /// to look: it drifts from `b − A x` in floating point, so the iteration goes on from the
 /// recomputed one (residual replacement). Never stops early silently: `converged` is false
@@ -67,6 +68,7 @@ fn true_residual(apply: &dyn Fn(&[f64], &mut [f64]), b: &[f64], x: &[f64], r: &m
 #[allow(clippy::too_many_arguments)]
 pub fn pcg(
     apply: &dyn Fn(&[f64], &mut [f64]),
+    residual: Residual<'_>,
     precond: &mut dyn FnMut(&[f64], &mut [f64]),
     measure: &dyn Fn(&[f64], &[f64]) -> f64,
     b: &[f64],
@@ -86,7 +88,7 @@ pub fn pcg(
         });
     }
     let mut r = vec![0.0; n];
-    true_residual(apply, b, x, &mut r);
+    true_residual(residual, b, x, &mut r);
     let mut z = vec![0.0; n];
     let mut q = vec![0.0; n];
     let mut rnorm = dot(&r, &r).sqrt();
@@ -145,7 +147,7 @@ pub fn pcg(
         let pq = dot(&p, &q);
         if pq <= 0.0 || !pq.is_finite() || rz <= 0.0 {
             // Exact solution reached, or a breakdown: the check below reports which.
-            true_residual(apply, b, x, &mut r);
+            true_residual(residual, b, x, &mut r);
             rnorm = dot(&r, &r).sqrt();
             converged = rnorm <= tol * bnorm && measure(x, &r) <= 1.0;
             break;
@@ -163,13 +165,13 @@ pub fn pcg(
         }
         checked = false;
         if rnorm <= tol * bnorm {
-            true_residual(apply, b, x, &mut r);
+            true_residual(residual, b, x, &mut r);
             rnorm = dot(&r, &r).sqrt();
             checked = true;
         }
     }
     if !checked {
-        true_residual(apply, b, x, &mut r);
+        true_residual(residual, b, x, &mut r);
         rnorm = dot(&r, &r).sqrt();
     }
     Ok(Outcome {
@@ -177,4 +179,91 @@ pub fn pcg(
         residual: rnorm / bnorm,
         converged,
     })
+}
+
+/// Relative residual each inner solve of [`refined`] reaches.
+pub const INNER_TOL: f64 = 1e-6;
+
+/// Refinement steps at most in [`refined`].
+const REFINE_STEPS: usize = 8;
+
+/// Iterative refinement around [`pcg`]: from `x`, repeatedly the residual `r = b − A x`
+/// recomputed by `exact` (summed exactly: not swamped by the rounding of the large
+/// conductances' rows), then the correction `A δ = r` by preconditioned CG from 0 to a
+/// relative residual [`INNER_TOL`] (in plain arithmetic: its rounding is relative to the
+/// correction, not to `x`), `x += δ`; until `‖r‖₂ ≤ tol ‖b‖₂` and `measure(x, r) ≤ 1`.
+/// Each step gains the inner solve's factor on every part of the error, however far below
+/// the rounding of `A x` in the large rows it lies (a flow rate many decades below the
+/// conductances near the percolation threshold), where one long CG run stalls at that
+/// rounding. `converged` is false after `max_iter` inner iterations in total, or when a step
+/// no longer halves the measure (then accepted within [`STALL_ACCEPT`] of the target).
+#[allow(clippy::too_many_arguments)]
+pub fn refined(
+    apply: &dyn Fn(&[f64], &mut [f64]),
+    exact: Residual<'_>,
+    precond: &mut dyn FnMut(&[f64], &mut [f64]),
+    measure: &dyn Fn(&[f64], &[f64]) -> f64,
+    b: &[f64],
+    x: &mut [f64],
+    tol: f64,
+    max_iter: usize,
+    should_stop: Option<&(dyn Fn() -> bool + Sync)>,
+) -> Result<Outcome> {
+    let n = b.len();
+    let bnorm = dot(b, b).sqrt();
+    if bnorm == 0.0 {
+        x.iter_mut().for_each(|v| *v = 0.0);
+        return Ok(Outcome {
+            iterations: 0,
+            residual: 0.0,
+            converged: true,
+        });
+    }
+    let plain = |x: &[f64], b: &[f64], r: &mut [f64]| {
+        apply(x, r);
+        r.par_chunks_mut(CHUNK)
+            .zip(b.par_chunks(CHUNK))
+            .for_each(|(rc, bc)| rc.iter_mut().zip(bc).for_each(|(rv, bv)| *rv = bv - *rv));
+    };
+    let mut r = vec![0.0; n];
+    let mut d = vec![0.0; n];
+    let mut it = 0;
+    let mut last = f64::INFINITY;
+    let mut step = 0;
+    loop {
+        exact(x, b, &mut r);
+        let rel = dot(&r, &r).sqrt() / bnorm;
+        let m = measure(x, &r);
+        if rel <= tol && m <= 1.0 {
+            return Ok(Outcome {
+                iterations: it,
+                residual: rel,
+                converged: true,
+            });
+        }
+        let stalled = step >= 2 && m > 0.5 * last && rel <= tol;
+        if stalled || step >= REFINE_STEPS || it >= max_iter || !rel.is_finite() {
+            return Ok(Outcome {
+                iterations: it,
+                residual: rel,
+                converged: stalled && m <= STALL_ACCEPT,
+            });
+        }
+        last = m;
+        step += 1;
+        d.iter_mut().for_each(|v| *v = 0.0);
+        let inner = pcg(
+            apply,
+            &plain,
+            precond,
+            &|_, _| 0.0,
+            &r,
+            &mut d,
+            INNER_TOL,
+            max_iter - it,
+            should_stop,
+        )?;
+        it += inner.iterations;
+        axpy(1.0, &d, x);
+    }
 }

@@ -161,13 +161,30 @@ pub struct Solution {
     pub solver: &'static str,
 }
 
-/// Bytes a solve of `cells` cells needs (inputs not counted).
+/// Bytes a solve of `cells` cells needs beside its linear solver (inputs not counted).
 pub fn memory_estimate(cells: usize) -> u64 {
     let c = cells as u64;
     // transposed inputs 9, labels 4, open mask 1, conductance 8, fine operator 33, two
-    // right-hand sides 16, CG vectors φ, ψ, r, z, p, q and the cycle's work vector 56,
+    // right-hand sides 16, vectors φ, ψ and the refinement's and CG's r, δ, r, z, p, q 64,
     // outputs pressure + two fluxes 24.
-    c * (9 + 4 + 1 + 8 + 33 + 16 + 56 + 24) + multigrid::memory_estimate(cells)
+    c * (9 + 4 + 1 + 8 + 33 + 16 + 64 + 24)
+}
+
+/// Bytes of a multigrid solve of `cells` cells of which `unknowns` carry unknowns.
+pub fn multigrid_estimate(cells: usize, unknowns: usize) -> u64 {
+    memory_estimate(cells) + multigrid::memory_estimate(unknowns)
+}
+
+/// Entries per unknown below which a sparse Cholesky factor of a contact gap's spanning
+/// cells is not expected: about 25 at 1025², 65 at 4097² (10 million unknowns); the fill of
+/// a nested 2-D order grows with the size.
+fn factor_entries_lower_bound(unknowns: usize) -> u64 {
+    let m = unknowns as u64;
+    if m >= 8_000_000 {
+        60 * m
+    } else {
+        20 * m
+    }
 }
 
 fn validate(pr: &Problem<'_>, opts: &Options<'_>) -> Result<()> {
@@ -285,8 +302,9 @@ pub fn solve_labelled(
     }
     let cells = pr.ny * pr.nx;
     if let Some(limit) = opts.memory_limit {
-        // `Auto` needs the multigrid's memory at least; the factor is checked exactly
-        // after its symbolic analysis.
+        // Before the labelling only the cells are known: the rest of the solve, and the
+        // factor's rough estimate when it is asked for. The multigrid's hierarchy is checked
+        // once the unknowns are counted, the factor exactly after its symbolic analysis.
         let factor = match opts.solver {
             Solver::Cholesky => cholesky_estimate(cells),
             _ => 0,
@@ -609,7 +627,7 @@ fn solve_axis0(
     let mut levels = 0;
     // Room for the factor: what the limits leave beside the rest of the solve.
     let factor_room = {
-        let base = memory_estimate(n);
+        let base = multigrid_estimate(n, n_unknowns);
         let room = |l: u64| l.saturating_sub(base);
         match (opts.memory_limit, available_memory()) {
             (Some(l), Some(a)) => Some(room(l).min(room(a))),
@@ -620,7 +638,11 @@ fn solve_axis0(
     };
     // `Some(Ok)`: a factor; `Some(Err)`: the factor broke down (a non-positive pivot of the
     // rounded matrix); `None`: no factor (multigrid, or too large for `Auto`).
-    let factor = if n_unknowns == 0 || opts.solver == Solver::Multigrid {
+    // `Auto` skips the symbolic analysis (itself costly on large grids) when even the
+    // factor's lower bound does not fit.
+    let hopeless = opts.solver == Solver::Auto
+        && factor_room.is_some_and(|r| 16 * factor_entries_lower_bound(n_unknowns) > r);
+    let factor = if n_unknowns == 0 || opts.solver == Solver::Multigrid || hopeless {
         None
     } else {
         match direct::Factor::new(&fine, factor_room) {
@@ -633,23 +655,43 @@ fn solve_axis0(
     // `lo`: the parts of φ and ψ below the last digit of `x` and `psi` (the elimination's
     // refinement; empty otherwise).
     let mut lo = (Vec::new(), Vec::new());
+    // The factor's answer when it passes its checks; else the cancellation-free elimination,
+    // or with `Auto` beyond the elimination's size the multigrid (`None`).
+    let direct_answer = match factor {
+        None => None,
+        Some(f) => {
+            let trusted = f.ok().and_then(|mut f| {
+                let (x, psi, residual) = solve_direct(&mut f, &fine, &rhs, &b_out);
+                trusted(&fine, &rhs, &b_out, &x, &psi).then_some((x, psi, residual))
+            });
+            match trusted {
+                Some(t) => Some(t),
+                None if opts.solver == Solver::Auto && n_unknowns > gth::MAX_UNKNOWNS => None,
+                None => {
+                    let (x, psi, residual, split) = solve_gth(&fine, &rhs, &b_out, factor_room)?;
+                    lo = split;
+                    Some((x, psi, residual))
+                }
+            }
+        }
+    };
     let (st, x, psi, residual, solver) = if n_unknowns == 0 {
         (fine, vec![0.0; n], vec![0.0; n], 0.0, "none")
-    } else if let Some(f) = factor {
-        let trusted = f.ok().and_then(|mut f| {
-            let (x, psi, residual) = solve_direct(&mut f, &fine, &rhs, &b_out);
-            trusted(&fine, &rhs, &b_out, &x, &psi).then_some((x, psi, residual))
-        });
-        let (x, psi, residual) = match trusted {
-            Some(t) => t,
-            None => {
-                let (x, psi, residual, split) = solve_gth(&fine, &rhs, &b_out, factor_room)?;
-                lo = split;
-                (x, psi, residual)
-            }
-        };
+    } else if let Some((x, psi, residual)) = direct_answer {
         (fine, x, psi, residual, "cholesky")
     } else {
+        let need = multigrid_estimate(n, n_unknowns);
+        if let Some(limit) = opts.memory_limit {
+            if need > limit {
+                return Err(Error::TooLarge {
+                    bytes: need,
+                    limit,
+                    what: format!(
+                        "Reynolds flow on {ny} × {nx} by multigrid ({n_unknowns} unknowns)"
+                    ),
+                });
+            }
+        }
         let mg = Multigrid::new(fine);
         levels = mg.n_levels();
         let (x, psi, residual, it) = solve_multigrid(&mg, &rhs, &b_out, opts, max_iter)??;
@@ -940,9 +982,9 @@ fn rate_error(x: &[f64], r: &[f64]) -> f64 {
     parts.iter().sum()
 }
 
-/// `φ` and `ψ` by multigrid-preconditioned CG, each until its relative residual is `≤ tol`
-/// and its flow rate is accurate to `10 tol` (estimated from the true residual by
-/// [`rate_error`]); then the inlet and outlet rates must agree to [`FLUX_AGREEMENT`]. The
+/// `φ` and `ψ` by multigrid-preconditioned CG with iterative refinement ([`cg::refined`]),
+/// each until its relative residual is `≤ tol` and its flow rate is accurate to `tol`
+/// (estimated from the exact residual by [`rate_error`]); then the inlet and outlet rates must agree to [`FLUX_AGREEMENT`]. The
 /// inner `Err` is the failure to report (or to recover from with the direct solver).
 type MultigridOk = (Vec<f64>, Vec<f64>, f64, usize);
 fn solve_multigrid(
@@ -955,17 +997,37 @@ fn solve_multigrid(
     let n = b_in.len();
     let st = mg.fine();
     let qtol = opts.tol;
-    let mut work = vec![0.0; n];
     let apply = |v: &[f64], out: &mut [f64]| st.apply(v, out);
-    let mut pre = |r: &[f64], z: &mut [f64]| mg.apply(r, z, &mut work);
-    fn accurate(w: &[f64], qtol: f64) -> impl Fn(&[f64], &[f64]) -> f64 + '_ {
-        move |x: &[f64], r: &[f64]| rate_error(x, r).abs() / (qtol * cg::dot(w, x).abs())
+    let mut pre = |r: &[f64], z: &mut [f64]| mg.apply(r, z);
+    // The rate's first-order error at most `tol` of it, and the pressure change a Jacobi step
+    // would make, `max |r_k| / d_k`, at most `tol` (a dead end behind a narrow face has a
+    // small residual for a large pressure error).
+    fn accurate<'a>(
+        st: &'a assemble::Stencil,
+        w: &'a [f64],
+        qtol: f64,
+    ) -> impl Fn(&[f64], &[f64]) -> f64 + 'a {
+        move |x: &[f64], r: &[f64]| {
+            let jacobi = r
+                .par_chunks(cg::CHUNK)
+                .zip(st.d.par_chunks(cg::CHUNK))
+                .map(|(rc, dc)| {
+                    rc.iter()
+                        .zip(dc)
+                        .fold(0.0, |m: f64, (rv, dv)| m.max(rv.abs() / dv))
+                })
+                .reduce(|| 0.0, f64::max);
+            let rate = rate_error(x, r).abs() / (qtol * cg::dot(w, x).abs());
+            rate.max(jacobi / qtol)
+        }
     }
     let mut x = vec![0.0; n];
-    let a = cg::pcg(
+    let exact = |x: &[f64], b: &[f64], r: &mut [f64]| st.residual_compensated(x, b, r);
+    let a = cg::refined(
         &apply,
+        &exact,
         &mut pre,
-        &accurate(b_out, qtol),
+        &accurate(st, b_out, qtol),
         b_in,
         &mut x,
         opts.tol,
@@ -986,10 +1048,11 @@ fn solve_multigrid(
         .zip(st.active.par_iter())
         .map(|(&v, &on)| if on { 1.0 - v } else { 0.0 })
         .collect();
-    let b = cg::pcg(
+    let b = cg::refined(
         &apply,
+        &exact,
         &mut pre,
-        &accurate(b_in, qtol),
+        &accurate(st, b_in, qtol),
         b_out,
         &mut psi,
         opts.tol,

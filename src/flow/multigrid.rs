@@ -1,59 +1,77 @@
-//! Aggregation multigrid preconditioner for the 5-point Reynolds operator.
+//! Classical (Ruge–Stüben) algebraic multigrid preconditioner for the Reynolds operator.
 //!
-//! # Coarsening that follows the conductances
+//! # Why classical coarsening
 //!
-//! Near the percolation threshold the spanning cluster is a tortuous maze of necks, dead ends
-//! and walls one cell thick, with conductances `g³` spanning many decades. Fixed 2 × 2 blocks
-//! of the grid then lump together cells on both sides of a wall, or a wide channel with the
-//! neck that throttles it, and the coarse space cannot represent the pressure drop across
-//! them: conjugate gradients stall. So the aggregates are built from the matrix, by
-//! *double pairwise aggregation* (Notay, ETNA 37, 2010): every unknown is paired with its
-//! strongest unpaired neighbour `j`, provided the face is strong,
+//! Near the percolation threshold the spanning cluster is a maze of necks, dead ends and
+//! one-cell walls whose face conductances `g³` change by large factors from one cell to the
+//! next (the gap closes as `r^{3/2}` at a contact edge, so `g³ ∝ r^{4.5}`). Aggregation that
+//! only joins cells across faces within a factor of the strongest one (pairwise aggregation)
+//! then finds few pairs on such graded chains, coarsens by less than 10 % per pass and needs
+//! dozens of levels, or lumps a wide cell with the neck that throttles it when forced to
+//! coarsen: docs/flow.md has the measurements. Classical coarsening keeps every unknown
+//! either on the coarse grid (C) or interpolated from strong C neighbours (F) with weights
+//! built from its own row, so a neck is never averaged with the cells it separates and each
+//! level roughly halves the unknowns whatever the contrast.
+//!
+//! # Construction
+//!
+//! On the conductance form `(A x)_i = d_i x_i − Σ_j w_ij x_j`, `d_i = dir_i + Σ_j w_ij`:
+//!
+//! - strength: `j` strongly influences `i` when `w_ij ≥ θ max_k w_ik` (`θ` = [`THETA`];
+//!   only `w_ij > 0` counts);
+//! - C/F splitting: the first pass of Ruge and Stüben, sequential in unknown order (so
+//!   deterministic): repeatedly the undecided unknown on which most undecided ones depend
+//!   strongly becomes C and its strong dependents F;
+//! - interpolation to an F unknown `i`, classical with lumping: weak faces go to the
+//!   diagonal, a strong F neighbour `k` is distributed over the strong C neighbours of `i`
+//!   in proportion to `w_km` (lumped to the diagonal when it has none):
 //!
 //! ```text
-//! w_ij ≥ β max(max_k w_ik, max_k w_jk),   β = 1/4,
+//! P_ij = (w_ij + Σ_k w_ik w_kj / Σ_m w_km) / (dir_i + Σ_strong w_ik − Σ_lumped w_ik)
 //! ```
 //!
-//! else it stays alone; two such passes give aggregates of up to four connected cells.
-//! Prolongation is piecewise constant on the aggregates and the coarse operator is the
-//! Galerkin `Pᵀ A P`, which for a conductance operator is again one: coarse face weights are
-//! sums of the fine faces between two aggregates, reservoir conductances add up, and the
-//! diagonal is rebuilt as reservoir + Σ faces (no cancellation), so every level is a
-//! symmetric M-matrix. Aggregates never join cells that are not joined by a face.
+//!   whose row sum is `1 − dir_i / den` exactly, so constants are interpolated exactly away
+//!   from the reservoirs;
+//! - Galerkin coarse operator `Pᵀ A P`, its off-diagonal entries by the triple product and
+//!   its diagonal as reservoir + Σ faces, the reservoir `Pᵀ A (P 1)` computed from the known
+//!   row-sum deficits `δ_i = dir_i / den` (zero away from the reservoirs), so the diagonal
+//!   has no cancellation.
 //!
 //! # Cycle
 //!
-//! The finest level keeps the structured stencil and red–black Gauss–Seidel (parallel over
-//! rows); the coarse levels are sparse (compressed rows) and use a hybrid Gauss–Seidel: rows
-//! in fixed blocks of [`CHUNK`], Gauss–Seidel inside a block, the other blocks' values from
-//! before the sweep. Post-smoothing runs everything in reverse, so each cycle is a symmetric
-//! operator. Coarse levels are solved by two steps of Krylov acceleration of the next cycle
-//! (the K-cycle of Notay and Vassilevski), the coarsest (≤ [`COARSEST`] unknowns) by a
-//! dense Cholesky factor. Block boundaries do not depend on the thread count and every value
-//! is computed by the same arithmetic, so the preconditioner is deterministic.
+//! A V-cycle: one sweep of hybrid Gauss–Seidel before the coarse correction (rows in fixed
+//! blocks of [`CHUNK`], Gauss–Seidel inside a block, other blocks' values from before the
+//! sweep) and one reversed sweep after it, so the cycle is a symmetric positive definite
+//! operator and conjugate gradients apply; the coarsest level (≤ [`COARSEST`] unknowns) is
+//! solved by a dense Cholesky factor. Block boundaries and every sum's order are fixed, so
+//! the bits do not depend on the thread count.
 
 use std::sync::Mutex;
 
 use rayon::prelude::*;
 
-use super::assemble::{Stencil, ROWS_PER_TASK};
-use super::cg::{dot, CHUNK};
+use super::assemble::Stencil;
+use super::cg::CHUNK;
+
+/// Strength threshold θ.
+const THETA: f64 = 0.25;
 
 /// Coarsening stops at this many unknowns; the coarsest level is factored (dense).
-const COARSEST: usize = 400;
+const COARSEST: usize = 500;
 
-/// Strength threshold β of the pairing.
-const STRONG: f64 = 0.25;
-
-/// Most levels built (a guard; coarsening by about four gives far fewer).
+/// Most levels built (a guard; each level roughly halves the unknowns).
 const MAX_LEVELS: usize = 40;
 
-/// No aggregate (cells without unknowns).
+/// Coarsening that keeps more than this share of the unknowns stops the hierarchy.
+const MIN_REDUCTION: f64 = 0.9;
+
+/// No unknown (cells without one; F unknowns on the coarse map).
 const NONE: u32 = u32::MAX;
 
-/// A conductance operator in compressed rows: `(A x)_i = d_i x_i − Σ_j w_ij x_j`,
-/// `d_i = dir_i + Σ_j w_ij`.
-pub struct Graph {
+/// A symmetric operator in compressed rows, conductance form:
+/// `(A x)_i = d_i x_i − Σ_j w_ij x_j`, `d_i = dir_i + Σ_j w_ij` (`w` of either sign on
+/// coarse levels).
+struct Graph {
     n: usize,
     ptr: Vec<usize>,
     col: Vec<u32>,
@@ -62,284 +80,57 @@ pub struct Graph {
     d: Vec<f64>,
 }
 
-/// Fine cells of every aggregate (counting-sorted, ascending).
-struct Members {
+/// Interpolation from one level to the next, by rows (`p`) and by columns (`pt`).
+struct Interp {
     ptr: Vec<usize>,
-    list: Vec<u32>,
+    col: Vec<u32>,
+    val: Vec<f64>,
+    tptr: Vec<usize>,
+    trow: Vec<u32>,
+    tval: Vec<f64>,
 }
 
-/// The map from one level to the next.
-struct Map {
-    agg: Vec<u32>,
-    members: Members,
-}
-
-/// Work vectors of one coarse level.
+/// Work vectors of one level.
 struct Buffers {
     x: Vec<f64>,
     b: Vec<f64>,
     r: Vec<f64>,
-    c1: Vec<f64>,
-    v1: Vec<f64>,
-    c2: Vec<f64>,
-    v2: Vec<f64>,
     old: Vec<f64>,
 }
 
-/// The multigrid hierarchy (one cycle per application).
+/// The multigrid hierarchy (one V-cycle per application).
 pub struct Multigrid {
     fine: Stencil,
-    /// `maps[0]`: fine cells → `levels[0]`; `maps[l]`: `levels[l − 1]` → `levels[l]`.
-    maps: Vec<Map>,
+    /// Grid cell of each fine unknown.
+    cells: Vec<u32>,
     levels: Vec<Graph>,
+    /// `interps[l]`: `levels[l]` → `levels[l + 1]`.
+    interps: Vec<Interp>,
     bufs: Mutex<Vec<Buffers>>,
     coarse: DenseCholesky,
 }
 
-/// Bytes of the hierarchy below a finest level of `cells` cells.
-pub fn memory_estimate(cells: usize) -> u64 {
-    // Fine map: aggregate 4 B + member 4 B per cell. Coarse levels (together under a third of
-    // the fine cells): per unknown 8 work vectors (64 B), dir and d (16 B), row pointer 8 B,
-    // about 8 face entries of 12 B, two maps (16 B); plus the intermediate pairwise level
-    // while building (half the fine size, ≈ 120 B per unknown).
-    let c = cells as u64;
-    8 * c + c.div_ceil(3) * (64 + 16 + 8 + 96 + 16) + c.div_ceil(2) * 120
-}
-
-/// Neighbour access for the pairing and the Galerkin product.
-trait Neighbours: Sync {
-    fn len(&self) -> usize;
-    fn active(&self, i: usize) -> bool;
-    fn reservoir(&self, i: usize) -> f64;
-    /// Calls `f(j, w_ij)` for the faces of `i` with `w_ij > 0`.
-    fn for_each(&self, i: usize, f: impl FnMut(usize, f64));
-}
-
-impl Neighbours for Stencil {
-    fn len(&self) -> usize {
-        self.ny * self.nx
-    }
-    fn active(&self, i: usize) -> bool {
-        self.active[i]
-    }
-    fn reservoir(&self, i: usize) -> f64 {
-        self.dir[i]
-    }
-    #[inline(always)]
-    fn for_each(&self, k: usize, f: impl FnMut(usize, f64)) {
-        self.for_each_face(k, f);
-    }
-}
-
-impl Neighbours for Graph {
-    fn len(&self) -> usize {
-        self.n
-    }
-    fn active(&self, _i: usize) -> bool {
-        true
-    }
-    fn reservoir(&self, i: usize) -> f64 {
-        self.dir[i]
-    }
-    #[inline(always)]
-    fn for_each(&self, i: usize, mut f: impl FnMut(usize, f64)) {
-        for p in self.ptr[i]..self.ptr[i + 1] {
-            f(self.col[p] as usize, self.w[p]);
-        }
-    }
-}
-
-/// One pairwise pass: aggregate index per unknown (`NONE` when inactive) and their number.
-fn pair<G: Neighbours>(g: &G, beta: f64) -> (Vec<u32>, usize) {
-    let n = g.len();
-    let wmax: Vec<f64> = (0..n)
-        .into_par_iter()
-        .with_min_len(CHUNK)
-        .map(|i| {
-            let mut m: f64 = 0.0;
-            g.for_each(i, |_, w| m = m.max(w));
-            m
-        })
-        .collect();
-    let mut agg = vec![NONE; n];
-    let mut nc: u32 = 0;
-    for i in 0..n {
-        if agg[i] != NONE || !g.active(i) {
-            continue;
-        }
-        let (mut best, mut bw) = (usize::MAX, 0.0);
-        let (mut near, mut nw) = (usize::MAX, 0.0);
-        g.for_each(i, |j, w| {
-            if j == i || w < beta * wmax[i].max(wmax[j]) {
-                return;
-            }
-            if agg[j] == NONE && w > bw {
-                best = j;
-                bw = w;
-            }
-            if agg[j] != NONE && w > nw {
-                near = j;
-                nw = w;
-            }
-        });
-        if best == usize::MAX && near != usize::MAX {
-            // Every strong neighbour is taken (a dead end off a junction): join the strongest
-            // one's aggregate rather than stay alone, or a star never coarsens.
-            agg[i] = agg[near];
-            continue;
-        }
-        agg[i] = nc;
-        if best != usize::MAX {
-            agg[best] = nc;
-        }
-        nc += 1;
-    }
-    (agg, nc as usize)
-}
-
-fn members(agg: &[u32], nc: usize) -> Members {
-    let mut ptr = vec![0usize; nc + 1];
-    for &a in agg {
-        if a != NONE {
-            ptr[a as usize + 1] += 1;
-        }
-    }
-    for i in 0..nc {
-        ptr[i + 1] += ptr[i];
-    }
-    let mut next = ptr[..nc].to_vec();
-    let mut list = vec![0u32; ptr[nc]];
-    for (i, &a) in agg.iter().enumerate() {
-        if a != NONE {
-            list[next[a as usize]] = i as u32;
-            next[a as usize] += 1;
-        }
-    }
-    Members { ptr, list }
-}
-
-/// Galerkin coarse operator `Pᵀ A P` for the aggregates `agg` (their members `mem`).
-fn galerkin<G: Neighbours>(g: &G, agg: &[u32], mem: &Members) -> Graph {
-    let nc = mem.ptr.len() - 1;
-    // Rows in fixed blocks: each block's entries in row order, blocks concatenated in order.
-    // Per block: row lengths, columns, weights, reservoir conductances.
-    type Block = (Vec<usize>, Vec<u32>, Vec<f64>, Vec<f64>);
-    let blocks: Vec<Block> = (0..nc.div_ceil(CHUNK))
-        .into_par_iter()
-        .map(|blk| {
-            let rows = blk * CHUNK..((blk + 1) * CHUNK).min(nc);
-            let mut len = Vec::with_capacity(rows.len());
-            let mut col = Vec::new();
-            let mut w = Vec::new();
-            let mut dir = Vec::with_capacity(rows.len());
-            let mut row: Vec<(u32, f64)> = Vec::new();
-            for ci in rows {
-                row.clear();
-                let mut dsum = 0.0;
-                for &m in &mem.list[mem.ptr[ci]..mem.ptr[ci + 1]] {
-                    dsum += g.reservoir(m as usize);
-                    g.for_each(m as usize, |j, wj| {
-                        let cj = agg[j];
-                        if cj as usize != ci && cj != NONE {
-                            match row.iter_mut().find(|e| e.0 == cj) {
-                                Some(e) => e.1 += wj,
-                                None => row.push((cj, wj)),
-                            }
-                        }
-                    });
-                }
-                row.sort_unstable_by_key(|e| e.0);
-                len.push(row.len());
-                for &(c, v) in &row {
-                    col.push(c);
-                    w.push(v);
-                }
-                dir.push(dsum);
-            }
-            (len, col, w, dir)
-        })
-        .collect();
-    let nnz: usize = blocks.iter().map(|b| b.1.len()).sum();
-    let mut ptr = Vec::with_capacity(nc + 1);
-    let mut col = Vec::with_capacity(nnz);
-    let mut w = Vec::with_capacity(nnz);
-    let mut dir = Vec::with_capacity(nc);
-    ptr.push(0);
-    for (l, c, v, d) in blocks {
-        for len in l {
-            ptr.push(ptr.last().copied().unwrap_or(0) + len);
-        }
-        col.extend_from_slice(&c);
-        w.extend_from_slice(&v);
-        dir.extend_from_slice(&d);
-    }
-    let d = (0..nc)
-        .into_par_iter()
-        .with_min_len(CHUNK)
-        .map(|i| dir[i] + w[ptr[i]..ptr[i + 1]].iter().sum::<f64>())
-        .collect();
-    Graph {
-        n: nc,
-        ptr,
-        col,
-        w,
-        dir,
-        d,
-    }
-}
-
-/// Two pairwise passes on `g`: the map to the coarse level and the coarse operator.
-fn coarsen<G: Neighbours>(g: &G) -> (Map, Graph) {
-    let active = (0..g.len()).filter(|&i| g.active(i)).count();
-    // Relax the strength test when strong pairs are too few to coarsen (a chain of faces
-    // alternating strong and weak): convergence needs the levels to shrink.
-    let pass = |h: &dyn Fn(f64) -> (Vec<u32>, usize), n: usize| {
-        let (a, nc) = h(STRONG);
-        if nc * 10 > n * 9 {
-            h(0.0)
-        } else {
-            (a, nc)
-        }
-    };
-    let (a1, n1) = pass(&|beta| pair(g, beta), active);
-    let m1 = members(&a1, n1);
-    let g1 = galerkin(g, &a1, &m1);
-    drop(m1);
-    let (a2, n2) = pass(&|beta| pair(&g1, beta), n1);
-    let agg: Vec<u32> = a1
-        .par_iter()
-        .with_min_len(CHUNK)
-        .map(|&a| if a == NONE { NONE } else { a2[a as usize] })
-        .collect();
-    let m2 = members(&a2, n2);
-    let coarse = galerkin(&g1, &a2, &m2);
-    drop(m2);
-    let members = members(&agg, n2);
-    (Map { agg, members }, coarse)
+/// Bytes of the hierarchy for `unknowns` fine unknowns: [`Multigrid::bytes`] measured 323
+/// to 324 bytes per unknown on contact gaps from 513² to 4097² (operator complexity 2.1 to
+/// 2.2), plus the setup's transient vectors.
+pub fn memory_estimate(unknowns: usize) -> u64 {
+    unknowns as u64 * 360
 }
 
 impl Graph {
-    /// `y = A x`.
-    fn apply(&self, x: &[f64], y: &mut [f64]) {
-        y.par_chunks_mut(CHUNK).enumerate().for_each(|(blk, yc)| {
-            let i0 = blk * CHUNK;
-            for (t, yv) in yc.iter_mut().enumerate() {
-                let i = i0 + t;
-                let mut v = self.d[i] * x[i];
-                for p in self.ptr[i]..self.ptr[i + 1] {
-                    v -= self.w[p] * x[self.col[p] as usize];
-                }
-                *yv = v;
-            }
-        });
-    }
-
     /// `r = b − A x`.
     fn residual(&self, x: &[f64], b: &[f64], r: &mut [f64]) {
-        self.apply(x, r);
-        r.par_chunks_mut(CHUNK)
-            .zip(b.par_chunks(CHUNK))
-            .for_each(|(rc, bc)| rc.iter_mut().zip(bc).for_each(|(rv, bv)| *rv = bv - *rv));
+        r.par_chunks_mut(CHUNK).enumerate().for_each(|(blk, rc)| {
+            let i0 = blk * CHUNK;
+            for (t, rv) in rc.iter_mut().enumerate() {
+                let i = i0 + t;
+                let mut v = b[i] - self.d[i] * x[i];
+                for p in self.ptr[i]..self.ptr[i + 1] {
+                    v += self.w[p] * x[self.col[p] as usize];
+                }
+                *rv = v;
+            }
+        });
     }
 
     /// Hybrid Gauss–Seidel sweep (module docs); `old` is scratch of size `n`.
@@ -374,23 +165,496 @@ impl Graph {
             }
         });
     }
+
+    /// Entries off the diagonal.
+    fn entries(&self) -> usize {
+        self.col.len()
+    }
+
+    /// `w_ij` (0 when `j` is not a neighbour of `i`).
+    #[inline]
+    fn weight(&self, i: usize, j: u32) -> f64 {
+        let row = self.ptr[i]..self.ptr[i + 1];
+        match self.col[row.clone()].binary_search(&j) {
+            Ok(p) => self.w[row.start + p],
+            Err(_) => 0.0,
+        }
+    }
+}
+
+/// The fine operator on its active cells: the graph and the cell of each unknown.
+fn fine_graph(st: &Stencil) -> (Graph, Vec<u32>) {
+    let n = st.ny * st.nx;
+    let mut index = vec![NONE; n];
+    let mut cells = Vec::new();
+    for (k, slot) in index.iter_mut().enumerate() {
+        if st.active[k] {
+            *slot = cells.len() as u32;
+            cells.push(k as u32);
+        }
+    }
+    let m = cells.len();
+    type Block = (Vec<usize>, Vec<u32>, Vec<f64>);
+    let blocks: Vec<Block> = cells
+        .par_chunks(CHUNK)
+        .map(|cs| {
+            let mut len = Vec::with_capacity(cs.len());
+            let mut col = Vec::with_capacity(4 * cs.len());
+            let mut w = Vec::with_capacity(4 * cs.len());
+            for &k in cs {
+                let mut row: [(u32, f64); 4] = [(NONE, 0.0); 4];
+                let mut nb = 0;
+                st.for_each_face(k as usize, |l, c| {
+                    let t = index[l];
+                    if t == NONE {
+                        return;
+                    }
+                    // The two faces of a 2-wide periodic row join the same pair: add them.
+                    if let Some(e) = row[..nb].iter_mut().find(|e| e.0 == t) {
+                        e.1 += c;
+                    } else {
+                        row[nb] = (t, c);
+                        nb += 1;
+                    }
+                });
+                row[..nb].sort_unstable_by_key(|e| e.0);
+                len.push(nb);
+                for &(t, c) in &row[..nb] {
+                    col.push(t);
+                    w.push(c);
+                }
+            }
+            (len, col, w)
+        })
+        .collect();
+    let (ptr, col, w) = concat(blocks);
+    let dir: Vec<f64> = cells.par_iter().map(|&k| st.dir[k as usize]).collect();
+    let d: Vec<f64> = cells.par_iter().map(|&k| st.d[k as usize]).collect();
+    (
+        Graph {
+            n: m,
+            ptr,
+            col,
+            w,
+            dir,
+            d,
+        },
+        cells,
+    )
+}
+
+/// Row blocks (row lengths, columns, values) concatenated in order into compressed rows.
+fn concat<T: Copy>(blocks: Vec<(Vec<usize>, Vec<u32>, Vec<T>)>) -> (Vec<usize>, Vec<u32>, Vec<T>) {
+    let rows: usize = blocks.iter().map(|b| b.0.len()).sum();
+    let nnz: usize = blocks.iter().map(|b| b.1.len()).sum();
+    let mut ptr = Vec::with_capacity(rows + 1);
+    let mut col = Vec::with_capacity(nnz);
+    let mut val = Vec::with_capacity(nnz);
+    ptr.push(0);
+    for (l, c, v) in blocks {
+        for len in l {
+            ptr.push(ptr.last().copied().unwrap_or(0) + len);
+        }
+        col.extend_from_slice(&c);
+        val.extend_from_slice(&v);
+    }
+    (ptr, col, val)
+}
+
+/// Largest positive face of every row.
+fn strongest(g: &Graph) -> Vec<f64> {
+    (0..g.n)
+        .into_par_iter()
+        .with_min_len(CHUNK)
+        .map(|i| {
+            g.w[g.ptr[i]..g.ptr[i + 1]]
+                .iter()
+                .fold(0.0, |m: f64, &w| m.max(w))
+        })
+        .collect()
+}
+
+/// Whether `w` (a face of a row whose largest face is `wmax`) is strong.
+#[inline(always)]
+fn strong(w: f64, wmax: f64) -> bool {
+    w > 0.0 && w >= THETA * wmax
+}
+
+/// Ruge–Stüben first pass: the coarse index of every C unknown (`NONE` for F) and their
+/// number.
+fn split(g: &Graph, wmax: &[f64]) -> (Vec<u32>, usize) {
+    let n = g.n;
+    const UNDECIDED: u8 = 0;
+    const C: u8 = 1;
+    const F: u8 = 2;
+    // λ_i: unknowns that depend strongly on i (i strongly influences j: w_ji ≥ θ max_k w_jk).
+    let mut lambda: Vec<u32> = (0..n)
+        .into_par_iter()
+        .with_min_len(CHUNK)
+        .map(|i| {
+            let mut c = 0;
+            for p in g.ptr[i]..g.ptr[i + 1] {
+                let j = g.col[p] as usize;
+                // w_ji = w_ij (symmetric).
+                if strong(g.w[p], wmax[j]) {
+                    c += 1;
+                }
+            }
+            c
+        })
+        .collect();
+    let mut state = vec![UNDECIDED; n];
+    // Buckets of undecided unknowns by λ: doubly linked lists.
+    let top0 = lambda.iter().copied().max().unwrap_or(0) as usize;
+    let mut cap = (top0 + 1).max(16);
+    let mut head = vec![NONE; cap];
+    let mut next = vec![NONE; n];
+    let mut prev = vec![NONE; n];
+    // Insert in reverse so that each bucket lists unknowns in ascending order.
+    for i in (0..n).rev() {
+        let l = lambda[i] as usize;
+        next[i] = head[l];
+        if head[l] != NONE {
+            prev[head[l] as usize] = i as u32;
+        }
+        head[l] = i as u32;
+    }
+    let unlink = |i: usize, l: usize, head: &mut [u32], next: &mut [u32], prev: &mut [u32]| {
+        let (pv, nx) = (prev[i], next[i]);
+        if pv != NONE {
+            next[pv as usize] = nx;
+        } else {
+            head[l] = nx;
+        }
+        if nx != NONE {
+            prev[nx as usize] = pv;
+        }
+        prev[i] = NONE;
+        next[i] = NONE;
+    };
+    let mut top = top0;
+    loop {
+        while top > 0 && head[top] == NONE {
+            top -= 1;
+        }
+        let i = head[top];
+        if i == NONE {
+            break;
+        }
+        let i = i as usize;
+        unlink(i, top, &mut head, &mut next, &mut prev);
+        state[i] = C;
+        // Strong dependents of i become F; their strong influencers gain weight.
+        for p in g.ptr[i]..g.ptr[i + 1] {
+            let j = g.col[p] as usize;
+            if state[j] != UNDECIDED || !strong(g.w[p], wmax[j]) {
+                continue;
+            }
+            unlink(j, lambda[j] as usize, &mut head, &mut next, &mut prev);
+            state[j] = F;
+            for q in g.ptr[j]..g.ptr[j + 1] {
+                let k = g.col[q] as usize;
+                if state[k] != UNDECIDED || !strong(g.w[q], wmax[j]) {
+                    continue;
+                }
+                let l = lambda[k] as usize;
+                unlink(k, l, &mut head, &mut next, &mut prev);
+                lambda[k] += 1;
+                let l = l + 1;
+                if l >= cap {
+                    cap *= 2;
+                    head.resize(cap, NONE);
+                }
+                next[k] = head[l];
+                if head[l] != NONE {
+                    prev[head[l] as usize] = k as u32;
+                }
+                head[l] = k as u32;
+                top = top.max(l);
+            }
+        }
+        // Unknowns that strongly influence i lose weight.
+        for p in g.ptr[i]..g.ptr[i + 1] {
+            let k = g.col[p] as usize;
+            if state[k] != UNDECIDED || !strong(g.w[p], wmax[i]) {
+                continue;
+            }
+            let l = lambda[k] as usize;
+            if l == 0 {
+                continue;
+            }
+            unlink(k, l, &mut head, &mut next, &mut prev);
+            lambda[k] -= 1;
+            let l = l - 1;
+            next[k] = head[l];
+            if head[l] != NONE {
+                prev[head[l] as usize] = k as u32;
+            }
+            head[l] = k as u32;
+        }
+    }
+    let mut cidx = vec![NONE; n];
+    let mut nc = 0u32;
+    for i in 0..n {
+        if state[i] == C {
+            cidx[i] = nc;
+            nc += 1;
+        }
+    }
+    (cidx, nc as usize)
+}
+
+/// Classical interpolation (module docs) and the row-sum deficits `δ_i = dir_i / den`.
+fn interpolation(g: &Graph, wmax: &[f64], cidx: &[u32], nc: usize) -> (Interp, Vec<f64>) {
+    let n = g.n;
+    type Block = (Vec<usize>, Vec<u32>, Vec<f64>, Vec<f64>);
+    let blocks: Vec<Block> = (0..n.div_ceil(CHUNK))
+        .into_par_iter()
+        .map(|blk| {
+            let rows = blk * CHUNK..((blk + 1) * CHUNK).min(n);
+            let mut len = Vec::with_capacity(rows.len());
+            let mut col = Vec::new();
+            let mut val = Vec::new();
+            let mut delta = Vec::with_capacity(rows.len());
+            let mut row: Vec<(u32, f64)> = Vec::new();
+            for i in rows {
+                if cidx[i] != NONE {
+                    len.push(1);
+                    col.push(cidx[i]);
+                    val.push(1.0);
+                    delta.push(0.0);
+                    continue;
+                }
+                row.clear();
+                let mut den = g.dir[i];
+                // Strong C neighbours first (their fine index and w_ij).
+                for p in g.ptr[i]..g.ptr[i + 1] {
+                    let j = g.col[p] as usize;
+                    if strong(g.w[p], wmax[i]) && cidx[j] != NONE {
+                        row.push((j as u32, g.w[p]));
+                        den += g.w[p];
+                    }
+                }
+                if row.is_empty() {
+                    len.push(0);
+                    delta.push(1.0);
+                    continue;
+                }
+                // Strong F neighbours: distributed over the strong C neighbours of i.
+                for p in g.ptr[i]..g.ptr[i + 1] {
+                    let k = g.col[p] as usize;
+                    let wik = g.w[p];
+                    if !strong(wik, wmax[i]) || cidx[k] != NONE {
+                        continue;
+                    }
+                    let mut sum = 0.0;
+                    for e in row.iter() {
+                        let wkm = g.weight(k, e.0);
+                        if wkm > 0.0 {
+                            sum += wkm;
+                        }
+                    }
+                    if sum > 0.0 {
+                        den += wik;
+                        let share = wik / sum;
+                        for e in row.iter_mut() {
+                            let wkm = g.weight(k, e.0);
+                            if wkm > 0.0 {
+                                e.1 += share * wkm;
+                            }
+                        }
+                    }
+                }
+                len.push(row.len());
+                for &(j, v) in row.iter() {
+                    col.push(cidx[j as usize]);
+                    val.push(v / den);
+                }
+                delta.push(g.dir[i] / den);
+            }
+            (len, col, val, delta)
+        })
+        .collect();
+    let mut deltas = Vec::with_capacity(n);
+    let blocks: Vec<(Vec<usize>, Vec<u32>, Vec<f64>)> = blocks
+        .into_iter()
+        .map(|(l, c, v, d)| {
+            deltas.extend_from_slice(&d);
+            (l, c, v)
+        })
+        .collect();
+    let (ptr, col, val) = concat(blocks);
+    // Transpose by counting (rows of each coarse column ascending).
+    let mut tptr = vec![0usize; nc + 1];
+    for &c in &col {
+        tptr[c as usize + 1] += 1;
+    }
+    for c in 0..nc {
+        tptr[c + 1] += tptr[c];
+    }
+    let mut fill = tptr[..nc].to_vec();
+    let mut trow = vec![0u32; col.len()];
+    let mut tval = vec![0.0; col.len()];
+    for i in 0..n {
+        for p in ptr[i]..ptr[i + 1] {
+            let c = col[p] as usize;
+            trow[fill[c]] = i as u32;
+            tval[fill[c]] = val[p];
+            fill[c] += 1;
+        }
+    }
+    (
+        Interp {
+            ptr,
+            col,
+            val,
+            tptr,
+            trow,
+            tval,
+        },
+        deltas,
+    )
+}
+
+/// Galerkin coarse operator `Pᵀ A P` in conductance form (module docs).
+fn galerkin(g: &Graph, ip: &Interp, delta: &[f64], nc: usize) -> Graph {
+    // (A (P 1))_i = dir_i (1 − δ_i) − Σ_k w_ik (δ_i − δ_k): exactly 0 away from reservoirs.
+    let a1: Vec<f64> = (0..g.n)
+        .into_par_iter()
+        .with_min_len(CHUNK)
+        .map(|i| {
+            let mut v = g.dir[i] * (1.0 - delta[i]);
+            for p in g.ptr[i]..g.ptr[i + 1] {
+                let k = g.col[p] as usize;
+                if delta[i] != delta[k] {
+                    v -= g.w[p] * (delta[i] - delta[k]);
+                }
+            }
+            v
+        })
+        .collect();
+    type Block = (Vec<usize>, Vec<u32>, Vec<f64>, Vec<f64>);
+    // Each task's row accumulator: `slot[c]` is the position of coarse column `c` in the
+    // row being built (NONE when absent); the row's entries keep the order of first touch,
+    // so every sum is taken in an order fixed by the matrices, not by the threads.
+    let nblocks = nc.div_ceil(CHUNK);
+    // Few splits: each allocates an accumulator of the coarse size (rows are independent,
+    // so the split does not change any value).
+    let per = nblocks.div_ceil(4 * rayon::current_num_threads()).max(1);
+    let blocks: Vec<Block> = (0..nblocks)
+        .into_par_iter()
+        .with_min_len(per)
+        .map_init(
+            || vec![NONE; nc],
+            |slot, blk| {
+                let rows = blk * CHUNK..((blk + 1) * CHUNK).min(nc);
+                let mut len = Vec::with_capacity(rows.len());
+                let mut col = Vec::new();
+                let mut w = Vec::new();
+                let mut dir = Vec::with_capacity(rows.len());
+                let mut acc: Vec<(u32, f64)> = Vec::new();
+                for ci in rows {
+                    acc.clear();
+                    let mut res = 0.0;
+                    let mut add = |acc: &mut Vec<(u32, f64)>, c: u32, v: f64| {
+                        let s = &mut slot[c as usize];
+                        if *s == NONE {
+                            *s = acc.len() as u32;
+                            acc.push((c, v));
+                        } else {
+                            acc[*s as usize].1 += v;
+                        }
+                    };
+                    for t in ip.tptr[ci]..ip.tptr[ci + 1] {
+                        let i = ip.trow[t] as usize;
+                        let pi = ip.tval[t];
+                        res += pi * a1[i];
+                        // (A P)(i, J) = d_i P_iJ − Σ_k w_ik P_kJ, for J ≠ ci.
+                        for p in ip.ptr[i]..ip.ptr[i + 1] {
+                            let cj = ip.col[p];
+                            if cj as usize != ci {
+                                add(&mut acc, cj, pi * g.d[i] * ip.val[p]);
+                            }
+                        }
+                        for q in g.ptr[i]..g.ptr[i + 1] {
+                            let k = g.col[q] as usize;
+                            let f = pi * g.w[q];
+                            for p in ip.ptr[k]..ip.ptr[k + 1] {
+                                let cj = ip.col[p];
+                                if cj as usize != ci {
+                                    add(&mut acc, cj, -f * ip.val[p]);
+                                }
+                            }
+                        }
+                    }
+                    for e in acc.iter() {
+                        slot[e.0 as usize] = NONE;
+                    }
+                    acc.retain(|e| e.1 != 0.0);
+                    acc.sort_unstable_by_key(|e| e.0);
+                    len.push(acc.len());
+                    for &(c, v) in acc.iter() {
+                        col.push(c);
+                        w.push(-v);
+                    }
+                    dir.push(res.max(0.0));
+                }
+                (len, col, w, dir)
+            },
+        )
+        .collect();
+    let mut dir = Vec::with_capacity(nc);
+    let blocks: Vec<(Vec<usize>, Vec<u32>, Vec<f64>)> = blocks
+        .into_iter()
+        .map(|(l, c, v, r)| {
+            dir.extend_from_slice(&r);
+            (l, c, v)
+        })
+        .collect();
+    let (ptr, col, w) = concat(blocks);
+    let d: Vec<f64> = (0..nc)
+        .into_par_iter()
+        .with_min_len(CHUNK)
+        .map(|i| {
+            let s = dir[i] + w[ptr[i]..ptr[i + 1]].iter().sum::<f64>();
+            // A positive definite operator has a positive diagonal; guard round-off.
+            if s > 0.0 {
+                s
+            } else {
+                w[ptr[i]..ptr[i + 1]].iter().map(|v| v.abs()).sum::<f64>() + dir[i]
+            }
+        })
+        .collect();
+    Graph {
+        n: nc,
+        ptr,
+        col,
+        w,
+        dir,
+        d,
+    }
 }
 
 impl Multigrid {
     /// Builds the hierarchy below the fine operator `fine` (moved in).
     pub fn new(fine: Stencil) -> Self {
-        let mut maps = Vec::new();
-        let mut levels: Vec<Graph> = Vec::new();
-        let (m, g) = coarsen(&fine);
-        maps.push(m);
-        levels.push(g);
+        let (g0, cells) = fine_graph(&fine);
+        let mut levels = vec![g0];
+        let mut interps = Vec::new();
         loop {
             let g = levels.last().expect("non-empty");
             if g.n <= COARSEST || levels.len() >= MAX_LEVELS {
                 break;
             }
-            let (m, c) = coarsen(g);
-            maps.push(m);
+            let wmax = strongest(g);
+            let (cidx, nc) = split(g, &wmax);
+            if nc == 0 || nc as f64 > MIN_REDUCTION * g.n as f64 {
+                break;
+            }
+            let (ip, delta) = interpolation(g, &wmax, &cidx, nc);
+            drop((cidx, wmax));
+            let c = galerkin(g, &ip, &delta, nc);
+            interps.push(ip);
             levels.push(c);
         }
         let bufs = levels
@@ -401,10 +665,6 @@ impl Multigrid {
                     x: vec![0.0; n],
                     b: vec![0.0; n],
                     r: vec![0.0; n],
-                    c1: vec![0.0; n],
-                    v1: vec![0.0; n],
-                    c2: vec![0.0; n],
-                    v2: vec![0.0; n],
                     old: vec![0.0; n],
                 }
             })
@@ -412,8 +672,9 @@ impl Multigrid {
         let coarse = DenseCholesky::new(levels.last().expect("non-empty"));
         Multigrid {
             fine,
-            maps,
+            cells,
             levels,
+            interps,
             bufs: Mutex::new(bufs),
             coarse,
         }
@@ -424,9 +685,24 @@ impl Multigrid {
         &self.fine
     }
 
-    /// Unknowns per coarse level.
+    /// Unknowns per level, the finest first.
     pub fn sizes(&self) -> Vec<usize> {
         self.levels.iter().map(|g| g.n).collect()
+    }
+
+    /// Bytes held by the hierarchy (the fine stencil not counted).
+    pub fn bytes(&self) -> u64 {
+        let g = |g: &Graph| 8 * g.ptr.len() + 12 * g.col.len() + 16 * g.n + 32 * g.n;
+        let p = |p: &Interp| 8 * (p.ptr.len() + p.tptr.len()) + 24 * p.col.len();
+        (4 * self.cells.len()
+            + self.levels.iter().map(g).sum::<usize>()
+            + self.interps.iter().map(p).sum::<usize>()) as u64
+    }
+
+    /// Operator complexity: entries (diagonal included) of all levels over the finest's.
+    pub fn complexity(&self) -> f64 {
+        let e = |g: &Graph| (g.entries() + g.n) as f64;
+        self.levels.iter().map(e).sum::<f64>() / e(&self.levels[0])
     }
 
     /// The finest operator, the hierarchy dropped.
@@ -436,203 +712,87 @@ impl Multigrid {
 
     /// Number of levels, the finest included.
     pub fn n_levels(&self) -> usize {
-        self.levels.len() + 1
+        self.levels.len()
     }
 
-    /// `z = M⁻¹ r`: one symmetric cycle from `z = 0`; `work` has the fine level's size.
-    pub fn apply(&self, r: &[f64], z: &mut [f64], work: &mut [f64]) {
+    /// `z = M⁻¹ r` on the grid's cells (0 on cells without unknowns): one V-cycle from 0.
+    pub fn apply(&self, r: &[f64], z: &mut [f64]) {
         let mut bufs = self.bufs.lock().unwrap_or_else(|e| e.into_inner());
-        let st = &self.fine;
+        let cells = &self.cells;
+        {
+            let b = &mut bufs[0].b;
+            b.par_chunks_mut(CHUNK)
+                .zip(cells.par_chunks(CHUNK))
+                .for_each(|(bc, cc)| bc.iter_mut().zip(cc).for_each(|(v, &k)| *v = r[k as usize]));
+        }
+        vcycle(&self.levels, &self.interps, &mut bufs, &self.coarse);
         z.par_iter_mut().for_each(|v| *v = 0.0);
-        sweep(st, r, z, 0, false);
-        sweep(st, r, z, 1, false);
-        st.residual(z, r, work);
-        let (here, rest) = bufs.split_first_mut().expect("a coarse level");
-        restrict(&self.maps[0].members, work, &mut here.b);
-        kcycle(&self.levels, &self.maps[1..], here, rest, &self.coarse);
-        prolong_add(&self.maps[0].agg, &here.x, z);
-        sweep(st, r, z, 1, true);
-        sweep(st, r, z, 0, true);
+        let x = &bufs[0].x;
+        // Scatter: each unknown's cell is distinct.
+        let zp = SharedMut(z.as_mut_ptr());
+        cells
+            .par_chunks(CHUNK)
+            .zip(x.par_chunks(CHUNK))
+            .for_each(move |(cc, xc)| {
+                let zp = zp;
+                for (&k, &v) in cc.iter().zip(xc) {
+                    // SAFETY: cells are distinct indices below the grid size, so no two
+                    // tasks write the same element.
+                    unsafe { *zp.0.add(k as usize) = v };
+                }
+            });
     }
 }
 
-/// Approximate solve of `levels[0] x = b` (in `here`): exact on the coarsest, else two steps
-/// of Krylov acceleration of the next cycle (the K-cycle), the second skipped when the first
-/// reduced the residual 4-fold.
-fn kcycle(
-    levels: &[Graph],
-    maps: &[Map],
-    here: &mut Buffers,
-    rest: &mut [Buffers],
-    coarse: &DenseCholesky,
-) {
+#[derive(Clone, Copy)]
+struct SharedMut(*mut f64);
+// SAFETY: see `Multigrid::apply`: concurrent tasks write disjoint elements.
+unsafe impl Send for SharedMut {}
+unsafe impl Sync for SharedMut {}
+
+/// One V-cycle on `levels[0]` for `bufs[0].b` into `bufs[0].x`.
+fn vcycle(levels: &[Graph], interps: &[Interp], bufs: &mut [Buffers], coarse: &DenseCholesky) {
+    let (here, rest) = bufs.split_first_mut().expect("a level");
     if levels.len() == 1 {
         coarse.solve(&here.b, &mut here.x);
         return;
     }
     let g = &levels[0];
-    let Buffers {
-        x,
-        b,
-        r,
-        c1,
-        v1,
-        c2,
-        v2,
-        old,
-    } = here;
-    cycle(levels, maps, rest, coarse, b, c1, r, old);
-    g.apply(c1, v1);
-    let rho1 = dot(c1, v1);
-    let alpha1 = dot(c1, b);
-    if rho1.is_nan() || rho1 <= 0.0 {
-        x.iter_mut().for_each(|v| *v = 0.0);
-        return;
-    }
-    let t1 = alpha1 / rho1;
-    r.par_chunks_mut(CHUNK)
-        .zip(b.par_chunks(CHUNK).zip(v1.par_chunks(CHUNK)))
-        .for_each(|(rc, (bc, vc))| {
-            rc.iter_mut()
-                .zip(bc.iter().zip(vc))
-                .for_each(|(rv, (bv, vv))| *rv = bv - t1 * vv)
-        });
-    let bnorm2 = dot(b, b);
-    let rnorm2 = dot(r, r);
-    if rnorm2 <= 0.0625 * bnorm2 {
-        x.par_chunks_mut(CHUNK)
-            .zip(c1.par_chunks(CHUNK))
-            .for_each(|(xc, cc)| xc.iter_mut().zip(cc).for_each(|(xv, cv)| *xv = t1 * cv));
-        return;
-    }
-    // The second cycle's own residual buffer: x is free until the combination below.
-    cycle(levels, maps, rest, coarse, r, c2, x, old);
-    g.apply(c2, v2);
-    let gamma = dot(c2, v1);
-    let beta = dot(c2, v2);
-    let alpha2 = dot(c2, r);
-    let rho2 = beta - gamma * gamma / rho1;
-    let (a1, a2) = if rho2 > 0.0 {
-        (t1 - gamma * alpha2 / (rho1 * rho2), alpha2 / rho2)
-    } else {
-        (t1, 0.0)
-    };
-    x.par_chunks_mut(CHUNK)
-        .zip(c1.par_chunks(CHUNK).zip(c2.par_chunks(CHUNK)))
-        .for_each(|(xc, (ac, bc))| {
-            xc.iter_mut()
-                .zip(ac.iter().zip(bc))
-                .for_each(|(xv, (u, w))| *xv = a1 * u + a2 * w)
-        });
-}
-
-/// One symmetric cycle on `levels[0]` for `b` into `x` (`r`, `old` work vectors); the
-/// coarser levels use `bufs`.
-#[allow(clippy::too_many_arguments)]
-fn cycle(
-    levels: &[Graph],
-    maps: &[Map],
-    bufs: &mut [Buffers],
-    coarse: &DenseCholesky,
-    b: &[f64],
-    x: &mut [f64],
-    r: &mut [f64],
-    old: &mut [f64],
-) {
-    let g = &levels[0];
-    x.iter_mut().for_each(|v| *v = 0.0);
+    let ip = &interps[0];
+    let Buffers { x, b, r, old } = here;
+    x.par_iter_mut().for_each(|v| *v = 0.0);
     g.smooth(b, x, old, false);
     g.residual(x, b, r);
-    let (below, rest) = bufs.split_first_mut().expect("a coarser level");
-    restrict(&maps[0].members, r, &mut below.b);
-    kcycle(&levels[1..], &maps[1..], below, rest, coarse);
-    prolong_add(&maps[0].agg, &below.x, x);
-    g.smooth(b, x, old, true);
-}
-
-/// Coarse right-hand side: sums of the fine residuals over each aggregate, in cell order.
-fn restrict(mem: &Members, r: &[f64], b: &mut [f64]) {
-    b.par_chunks_mut(CHUNK).enumerate().for_each(|(blk, bc)| {
-        for (t, bv) in bc.iter_mut().enumerate() {
-            let ci = blk * CHUNK + t;
-            *bv = mem.list[mem.ptr[ci]..mem.ptr[ci + 1]]
-                .iter()
-                .map(|&m| r[m as usize])
-                .sum();
+    {
+        let below = &mut rest[0];
+        below
+            .b
+            .par_chunks_mut(CHUNK)
+            .enumerate()
+            .for_each(|(blk, bc)| {
+                for (t, bv) in bc.iter_mut().enumerate() {
+                    let c = blk * CHUNK + t;
+                    let mut s = 0.0;
+                    for q in ip.tptr[c]..ip.tptr[c + 1] {
+                        s += ip.tval[q] * r[ip.trow[q] as usize];
+                    }
+                    *bv = s;
+                }
+            });
+    }
+    vcycle(&levels[1..], &interps[1..], rest, coarse);
+    let xc = &rest[0].x;
+    x.par_chunks_mut(CHUNK).enumerate().for_each(|(blk, xs)| {
+        for (t, v) in xs.iter_mut().enumerate() {
+            let i = blk * CHUNK + t;
+            let mut s = 0.0;
+            for p in ip.ptr[i]..ip.ptr[i + 1] {
+                s += ip.val[p] * xc[ip.col[p] as usize];
+            }
+            *v += s;
         }
     });
-}
-
-/// `x += P x_c` on the unknowns.
-fn prolong_add(agg: &[u32], xc: &[f64], x: &mut [f64]) {
-    x.par_chunks_mut(CHUNK)
-        .zip(agg.par_chunks(CHUNK))
-        .for_each(|(xs, ags)| {
-            for (v, &a) in xs.iter_mut().zip(ags) {
-                if a != NONE {
-                    *v += xc[a as usize];
-                }
-            }
-        });
-}
-
-#[derive(Clone, Copy)]
-struct SharedMut(*mut f64);
-// SAFETY: see `sweep`: concurrent tasks never touch the same element while one writes it.
-unsafe impl Send for SharedMut {}
-unsafe impl Sync for SharedMut {}
-
-/// One Gauss–Seidel half-sweep of the fine stencil over the cells with
-/// `(i + j) % 2 == colour`, in row order and, with `reverse`, from the last column to the
-/// first.
-fn sweep(st: &Stencil, b: &[f64], x: &mut [f64], colour: usize, reverse: bool) {
-    let (ny, nx) = (st.ny, st.nx);
-    assert_eq!(x.len(), ny * nx);
-    let xp = SharedMut(x.as_mut_ptr());
-    (0..ny)
-        .into_par_iter()
-        .with_min_len(ROWS_PER_TASK)
-        .for_each(move |i| {
-            let xp = xp;
-            let x = xp.0;
-            let base = i * nx;
-            // SAFETY: this task writes only cells of row i of this colour. It reads cells of
-            // rows i ± 1 in the same column (the other colour, written by nobody in this
-            // half-sweep) and cells of its own row, which no other task writes. All indices
-            // are below ny·nx.
-            let update = |j: usize| unsafe {
-                let k = base + j;
-                if !st.active[k] {
-                    return;
-                }
-                let mut v = b[k];
-                if j + 1 < nx {
-                    v += st.e[k] * *x.add(k + 1);
-                } else if st.periodic && nx > 1 {
-                    v += st.e[k] * *x.add(base);
-                }
-                if let Some(w) = st.west(j) {
-                    v += st.e[base + w] * *x.add(base + w);
-                }
-                if i + 1 < ny {
-                    v += st.s[k] * *x.add(k + nx);
-                }
-                if i > 0 {
-                    v += st.s[k - nx] * *x.add(k - nx);
-                }
-                *x.add(k) = v / st.d[k];
-            };
-            let first = (i + colour) % 2;
-            if reverse {
-                for j in (first..nx).step_by(2).rev() {
-                    update(j);
-                }
-            } else {
-                for j in (first..nx).step_by(2) {
-                    update(j);
-                }
-            }
-        });
+    g.smooth(b, x, old, true);
 }
 
 /// Dense Cholesky factor of the coarsest level (at most a few hundred unknowns).
@@ -660,8 +820,11 @@ impl DenseCholesky {
                     v -= l[k * n + p] * l[m * n + p];
                 }
                 if m == k {
-                    // SPD by construction; guard against round-off on a tiny pivot.
-                    l[k * n + k] = v.max(f64::MIN_POSITIVE).sqrt();
+                    // SPD by construction; a pivot lost to round-off (a coarse unknown joined
+                    // to the rest and the reservoirs by faces below ε of its own) solves as
+                    // decoupled.
+                    let piv = if v > f64::EPSILON * g.d[k] { v } else { g.d[k] };
+                    l[k * n + k] = piv.sqrt();
                 } else {
                     l[k * n + m] = v / l[m * n + m];
                 }

@@ -840,7 +840,7 @@ fn auto_uses_the_multigrid_when_the_factor_does_not_fit() {
     let exact = solve(&pr, &forced(Solver::Cholesky)).unwrap();
     assert_eq!(exact.solver, "cholesky");
     // Room for the rest of the solve but not for the factor.
-    let tight = memory_estimate(n * n) + 1024;
+    let tight = multigrid_estimate(n * n, n * n) + 1024;
     let auto = Options {
         memory_limit: Some(tight),
         ..Options::default()

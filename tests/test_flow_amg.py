@@ -1,0 +1,63 @@
+"""The multigrid flow solver on contact gaps at the percolation threshold.
+
+Oracles: scipy's sparse LU of the same finite-volume system (``tests/test_flow_solver.py``
+assembles it independently of leakpath) and leakpath's sparse Cholesky factor.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from test_flow_solver import oracle_rate
+
+import leakpath
+
+
+@pytest.fixture(scope="module")
+def threshold_gap():
+    """The last spanning state of the percolation-threshold bisection at 257² (periodic):
+    the free region is one tortuous channel, conductances over many decades."""
+    s = leakpath.spectral(257, 0.8, seed=3, rms_height=1.0)
+    th = leakpath.percolation_threshold(s, boundary="periodic", atol=1e-4 * s.height_range)
+    st = th.below
+    return np.maximum(st.gap, 0.0), np.asarray(st.contact), st.contact_fraction
+
+
+def test_threshold_gap_is_near_the_threshold(threshold_gap):
+    _, _, a = threshold_gap
+    assert 0.3 < a < 0.55
+
+
+def test_multigrid_matches_the_factor_and_scipy_at_the_threshold(threshold_gap):
+    gap, contact, _ = threshold_gap
+    n = gap.shape[0]
+    mg = leakpath.flow(gap, dx=1.0 / n, contact=contact, periodic=True, solver="multigrid")
+    ch = leakpath.flow(gap, dx=1.0 / n, contact=contact, periodic=True, solver="cholesky")
+    assert mg.solver == "multigrid" and ch.solver == "cholesky"
+    assert 0 < mg.iterations < 200
+    assert mg.flow_rate == pytest.approx(ch.flow_rate, rel=1e-8)
+    assert abs(mg.inlet_flow_rate / mg.flow_rate - 1) <= 1e-9
+    assert mg.conservation <= 1e-6
+    # The pressures agree where they are defined.
+    ok = np.isfinite(ch.pressure)
+    assert np.array_equal(ok, np.isfinite(mg.pressure))
+    assert np.max(np.abs(mg.pressure[ok] - ch.pressure[ok])) <= 1e-6
+
+
+def test_multigrid_matches_scipy_without_wrap(threshold_gap):
+    gap, contact, _ = threshold_gap
+    q = oracle_rate(gap, contact)
+    if q == 0:
+        pytest.skip("no spanning cluster without the wrap")
+    f = leakpath.flow(gap, dx=1.0, contact=contact, solver="multigrid")
+    assert f.flow_rate == pytest.approx(q, rel=1e-8)
+
+
+def test_multigrid_bits_do_not_depend_on_threads(threshold_gap):
+    gap, contact, _ = threshold_gap
+    n = gap.shape[0]
+    kw = dict(dx=1.0 / n, contact=contact, periodic=True, solver="multigrid")
+    a = leakpath.flow(gap, threads=1, **kw)
+    b = leakpath.flow(gap, threads=2, **kw)
+    assert a.flow_rate == b.flow_rate and a.iterations == b.iterations
+    assert np.array_equal(a.pressure, b.pressure, equal_nan=True)
