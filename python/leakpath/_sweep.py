@@ -107,7 +107,7 @@ from ._checkpoint import CHECKPOINT_FORMAT, CheckpointMismatch, _Checkpoint, _Le
 from ._core import __version__
 from ._percolation import percolations
 from ._table import COLUMNS, CSV_COLUMNS, SweepResult, _finish_row, surface_sha256
-from .contact import AUTO_ACTIVE_SET_MAX_POINTS, SOLVERS, ContactProblem, ContactState
+from .contact import SOLVERS, ContactProblem, ContactState
 from .errors import InvalidArgumentError, NotConvergedError
 from .moments import nayak_moments
 from .surfaces import Surface
@@ -480,13 +480,6 @@ def sweep(
         [(kind, v, "unloading") for kind, v, _ in reversed(loading[:-1])] if unload else []
     )
     run_solver = solver
-    # Polonsky–Keer warm-starts from the previous pressure field, which checkpoints keep.
-    uses_pk = (
-        solver == "polonsky-keer"
-        or hardness is not None
-        or (solver == "auto" and surface.heights.size > AUTO_ACTIVE_SET_MAX_POINTS)
-    )
-    keep_pressure = bool(warm_start) and (uses_pk or mean_pressures is not None)
     t_total = time.perf_counter()
 
     parameters: dict[str, Any] = {
@@ -515,6 +508,11 @@ def sweep(
 
     # Undeformed reference (Δ = 0: p = 0, u = 0, the whole interface is free).
     ref_state = problem.solve(0.0, solver=run_solver, warm_start=False)  # type: ignore[arg-type]
+    # Polonsky–Keer warm-starts from the previous pressure field, which checkpoints keep. The
+    # core resolves "auto" (the reference solve says which solver runs on this grid in
+    # displacement control; load control always runs Polonsky–Keer).
+    uses_pk = ref_state.solver == "polonsky-keer"
+    keep_pressure = bool(warm_start) and (uses_pk or mean_pressures is not None)
     ref_mom = nayak_moments(surface.heights, surface.dx)
     reference = {
         "h_s": surface.height_range,
