@@ -1,0 +1,293 @@
+//! The flow along axis 0 on the open cells: unknowns on the spanning clusters, the
+//! dimensionless system, the solve by the chosen path, and the flow rate with its checks.
+
+use rayon::prelude::*;
+
+use super::*;
+
+/// The dimensionless solution for flow along axis 0 with `φ = 1` at the inlet, 0 at the outlet,
+/// cell conductances `(g / g_ref)³`.
+pub(super) struct UnitSolution {
+    pub(super) gref: f64,
+    pub(super) phi: Vec<f64>,
+    pub(super) flux_along: Vec<f64>,
+    pub(super) flux_across: Vec<f64>,
+    pub(super) q_out: f64,
+    pub(super) q_in: f64,
+    pub(super) residual: f64,
+    pub(super) conservation: f64,
+    pub(super) iterations: usize,
+    pub(super) n_unknowns: usize,
+    pub(super) levels: usize,
+    pub(super) solver: &'static str,
+}
+
+pub(super) fn solve_axis0(
+    g: &[f64],
+    ny: usize,
+    nx: usize,
+    periodic: bool,
+    opts: &Options<'_>,
+    given: Option<(Vec<u32>, usize)>,
+) -> Result<UnitSolution> {
+    let n = ny * nx;
+    let gref = g.par_iter().cloned().reduce(|| 0.0, f64::max);
+    let mut c: Vec<f64> = if gref > 0.0 {
+        g.par_iter()
+            .map(|&v| {
+                let t = v / gref;
+                t * t * t
+            })
+            .collect()
+    } else {
+        vec![0.0; n]
+    };
+    let open: Vec<bool> = c.par_iter().map(|&v| v > 0.0).collect();
+    let per = Periodic {
+        axis0: false,
+        axis1: periodic,
+    };
+    let (labels, k) = match given {
+        Some((labels, k)) => {
+            if labels
+                .par_iter()
+                .zip(open.par_iter())
+                .any(|(&l, &o)| (l != 0) != o)
+            {
+                return Err(Error::invalid(
+                    "labels",
+                    "do not label exactly the open cells of this gap (free and g > 0)",
+                ));
+            }
+            (labels, k)
+        }
+        None => clusters::label(&open, ny, nx, Connectivity::Four, per)?,
+    };
+    drop(open);
+    // Touch flags per cluster: 1 inlet row, 2 outlet row.
+    let mut touch = vec![0u8; k + 1];
+    for j in 0..nx {
+        touch[labels[j] as usize] |= 1;
+        touch[labels[(ny - 1) * nx + j] as usize] |= 2;
+    }
+    touch[0] = 0;
+    // Only spanning clusters keep their conductance.
+    c.par_iter_mut()
+        .zip(labels.par_iter())
+        .for_each(|(cv, &l)| {
+            if touch[l as usize] != 3 {
+                *cv = 0.0;
+            }
+        });
+    let n_unknowns = labels
+        .par_iter()
+        .filter(|&&l| touch[l as usize] == 3)
+        .count();
+
+    let (fine, rhs) = fine_stencil(&c, ny, nx, periodic);
+    // The outlet reservoir's share of the diagonal: `Q_out = b_out · φ`, and `ψ = 1 − φ` (the
+    // flow reversed) solves `A ψ = b_out` with `Q_in = b_in · ψ`.
+    let b_out: Vec<f64> = (0..n)
+        .into_par_iter()
+        .map(|k| if k >= (ny - 1) * nx { 2.0 * c[k] } else { 0.0 })
+        .collect();
+    let max_iter = opts.max_iter.unwrap_or(DEFAULT_MAX_ITER);
+    let mut iterations = 0;
+    let mut levels = 0;
+    // Room for the factor: what the limits leave beside the rest of the solve.
+    let factor_room = {
+        let base = multigrid_estimate(n, n_unknowns);
+        let room = |l: u64| l.saturating_sub(base);
+        match (opts.memory_limit, available_memory()) {
+            (Some(l), Some(a)) => Some(room(l).min(room(a))),
+            (Some(l), None) => Some(room(l)),
+            (None, Some(a)) => Some(room(a)),
+            (None, None) => None,
+        }
+    };
+    // `Some(Ok)`: a factor; `Some(Err)`: the factor broke down (a non-positive pivot of the
+    // rounded matrix); `None`: no factor (multigrid, or too large for `Auto`).
+    // `Auto` skips the symbolic analysis (itself costly on large grids) when even the
+    // factor's lower bound does not fit.
+    let hopeless = opts.solver == Solver::Auto
+        && factor_room.is_some_and(|r| 16 * factor_entries_lower_bound(n_unknowns) > r);
+    let factor = if n_unknowns == 0 || opts.solver == Solver::Multigrid || hopeless {
+        None
+    } else {
+        match direct::Factor::new(&fine, factor_room) {
+            Ok(f) => Some(Ok(f)),
+            Err(Error::TooLarge { .. }) if opts.solver == Solver::Auto => None,
+            Err(e @ Error::NotConverged { .. }) => Some(Err(e)),
+            Err(e) => return Err(e),
+        }
+    };
+    // `lo`: the parts of φ and ψ below the last digit of `x` and `psi` (the elimination's
+    // refinement; empty otherwise).
+    let mut lo = (Vec::new(), Vec::new());
+    // The factor's answer when it passes its checks; else the cancellation-free elimination,
+    // or with `Auto` beyond the elimination's size the multigrid (`None`).
+    let direct_answer = match factor {
+        None => None,
+        Some(f) => {
+            let trusted = f.ok().and_then(|mut f| {
+                let (x, psi, residual) = solve_direct(&mut f, &fine, &rhs, &b_out);
+                trusted(&fine, &rhs, &b_out, &x, &psi).then_some((x, psi, residual))
+            });
+            match trusted {
+                Some(t) => Some(t),
+                None if opts.solver == Solver::Auto && n_unknowns > gth::MAX_UNKNOWNS => None,
+                None => {
+                    let (x, psi, residual, split) = solve_gth(&fine, &rhs, &b_out, factor_room)?;
+                    lo = split;
+                    Some((x, psi, residual))
+                }
+            }
+        }
+    };
+    let (st, x, psi, residual, solver) = if n_unknowns == 0 {
+        (fine, vec![0.0; n], vec![0.0; n], 0.0, "none")
+    } else if let Some((x, psi, residual)) = direct_answer {
+        (fine, x, psi, residual, "cholesky")
+    } else {
+        let need = multigrid_estimate(n, n_unknowns);
+        if let Some(limit) = opts.memory_limit {
+            if need > limit {
+                return Err(Error::TooLarge {
+                    bytes: need,
+                    limit,
+                    what: format!(
+                        "Reynolds flow on {ny} × {nx} by multigrid ({n_unknowns} unknowns)"
+                    ),
+                });
+            }
+        }
+        let mg = Multigrid::new(fine);
+        levels = mg.n_levels();
+        let (x, psi, residual, it) = solve_multigrid(&mg, &rhs, &b_out, opts, max_iter)??;
+        iterations = it;
+        (mg.into_fine(), x, psi, residual, "multigrid")
+    };
+    drop(rhs);
+    let st = &st;
+    // Pressures: solution on spanning cells, reservoir pressure on one-sided clusters.
+    let phi: Vec<f64> = (0..n)
+        .into_par_iter()
+        .map(|k| match touch[labels[k] as usize] {
+            3 => x[k],
+            1 => 1.0,
+            2 => 0.0,
+            _ => f64::NAN,
+        })
+        .collect();
+    drop(labels);
+    // A face flux `c_f (φ1 − φ2)` loses the digits of `φ` near 1 (all of the inlet side near
+    // the percolation threshold, where the flow is many decades below the conductances):
+    // there the same flux is `c_f (ψ2 − ψ1)` with `ψ = 1 − φ` solved for directly.
+    // With the low parts, a difference of two close pressures keeps the digits below the
+    // last one of `x` (the difference of the high parts is exact).
+    let (xlo, psilo) = (&lo.0, &lo.1);
+    let split = !xlo.is_empty();
+    let face = |cf: f64, k: usize, l: usize| -> f64 {
+        if cf <= 0.0 {
+            0.0
+        } else if x[k] + x[l] <= 1.0 {
+            if split {
+                cf * ((x[k] - x[l]) + (xlo[k] - xlo[l]))
+            } else {
+                cf * (x[k] - x[l])
+            }
+        } else if split {
+            cf * ((psi[l] - psi[k]) + (psilo[l] - psilo[k]))
+        } else {
+            cf * (psi[l] - psi[k])
+        }
+    };
+    let at = |v: &[f64], low: &[f64], k: usize| if split { v[k] + low[k] } else { v[k] };
+    // Fluxes along: (ny + 1) × nx.
+    let mut fa = vec![0.0; (ny + 1) * nx];
+    fa.par_chunks_mut(nx).enumerate().for_each(|(i, row)| {
+        for j in 0..nx {
+            row[j] = if i == 0 {
+                let cf = 2.0 * c[j];
+                if cf > 0.0 {
+                    cf * at(&psi, psilo, j)
+                } else {
+                    0.0
+                }
+            } else if i == ny {
+                let k = (ny - 1) * nx + j;
+                let cf = 2.0 * c[k];
+                if cf > 0.0 {
+                    cf * at(&x, xlo, k)
+                } else {
+                    0.0
+                }
+            } else {
+                let k = (i - 1) * nx + j;
+                face(st.s[k], k, k + nx)
+            };
+        }
+    });
+    let mut fb = vec![0.0; ny * (nx + 1)];
+    fb.par_chunks_mut(nx + 1).enumerate().for_each(|(i, row)| {
+        let base = i * nx;
+        for (j, v) in row.iter_mut().enumerate().take(nx).skip(1) {
+            *v = face(st.e[base + j - 1], base + j - 1, base + j);
+        }
+        if periodic && nx > 1 {
+            let w = face(st.e[base + nx - 1], base + nx - 1, base);
+            row[0] = w;
+            row[nx] = w;
+        }
+    });
+    drop(x);
+    drop(psi);
+    drop(lo);
+    let q_in: f64 = fa[..nx].iter().sum();
+    let q_out: f64 = fa[ny * nx..].iter().sum();
+    // Net flux out of every cell.
+    let worst = (0..ny)
+        .into_par_iter()
+        .map(|i| {
+            let mut m: f64 = 0.0;
+            for j in 0..nx {
+                let out = fa[(i + 1) * nx + j] - fa[i * nx + j] + fb[i * (nx + 1) + j + 1]
+                    - fb[i * (nx + 1) + j];
+                m = m.max(out.abs());
+            }
+            m
+        })
+        .reduce(|| 0.0, f64::max);
+    let conservation = if q_out != 0.0 {
+        worst / q_out.abs()
+    } else {
+        0.0
+    };
+    if conservation > CONSERVATION_MAX || !conservation.is_finite() {
+        return Err(Error::NotConverged {
+            iterations,
+            residual,
+            what: format!(
+                "reynolds-flow {solver} (the flow rate {q_out:e} is resolved but the net flux \
+                 of a cell reaches {conservation:.1e} of it: the flow passes necks whose g³ is \
+                 below ~1e-21 of the wide regions between them, too many decades for the \
+                 face fluxes to balance in double precision; close the cells of negligible \
+                 gap (set gaps below e.g. 1e-6 of the largest to 0))"
+            ),
+        });
+    }
+    Ok(UnitSolution {
+        gref,
+        phi,
+        flux_along: fa,
+        flux_across: fb,
+        q_out,
+        q_in,
+        residual,
+        conservation,
+        iterations,
+        n_unknowns,
+        levels,
+        solver,
+    })
+}

@@ -1,0 +1,281 @@
+//! The three solution paths of one system and their answer checks: the sparse Cholesky
+//! factor ([`super::direct`]), its star–mesh fallback ([`super::gth`]) and conjugate gradients
+//! with the multigrid preconditioner ([`super::multigrid`]).
+
+use rayon::prelude::*;
+
+use super::*;
+
+/// Largest net flux out of a cell, relative to the flow rate, of a returned solution.
+pub const CONSERVATION_MAX: f64 = 1e-6;
+
+/// Largest relative difference allowed between the inlet and the outlet flow rates.
+pub const FLUX_AGREEMENT: f64 = 1e-9;
+
+/// `Σ a_k b_k` over the solution's two right-hand sides, and the inlet/outlet test.
+pub(super) fn rates_agree(q_in: f64, q_out: f64) -> bool {
+    (q_in - q_out).abs() <= FLUX_AGREEMENT * q_out.abs()
+}
+
+/// `φ` from the factor, and `ψ = 1 − φ`: taken from `φ` when the inlet rate
+/// `Σ b_in (1 − φ)` keeps its digits (the cancellation bound `4 ε Σ b_in` is below `10⁻¹³` of
+/// it) and agrees with the outlet rate `b_out · φ` to [`DIRECT_AGREEMENT`]; else solved for
+/// with the same factor (the flow many decades below the conductances, near the percolation
+/// threshold). The larger relative residual of the solves.
+pub(super) fn solve_direct(
+    f: &mut direct::Factor,
+    st: &assemble::Stencil,
+    b_in: &[f64],
+    b_out: &[f64],
+) -> (Vec<f64>, Vec<f64>, f64) {
+    let n = b_in.len();
+    let mut x = vec![0.0; n];
+    let mut residual = f.solve(st, b_in, &mut x);
+    let q_out = cg::dot(b_out, &x);
+    let q_in = rate_error(&x, b_in);
+    let scale = cg::sum(b_in);
+    let kept = 4.0 * f64::EPSILON * scale <= 1e-13 * q_in.abs()
+        && (q_in - q_out).abs() <= DIRECT_AGREEMENT * q_out.abs();
+    let psi = if kept {
+        x.par_iter()
+            .zip(st.active.par_iter())
+            .map(|(&v, &on)| if on { 1.0 - v } else { 0.0 })
+            .collect()
+    } else {
+        let mut psi = vec![0.0; n];
+        residual = residual.max(f.solve(st, b_out, &mut psi));
+        psi
+    };
+    (x, psi, residual)
+}
+
+/// Inlet and outlet rates of a factored solve that agree to this need no reversed solve.
+pub(super) const DIRECT_AGREEMENT: f64 = 1e-12;
+
+/// Largest first-order error of a flow rate, relative to the rate, at which the factor's
+/// answer is kept.
+pub(super) const DIRECT_TRUST: f64 = 1e-12;
+
+/// Whether the refined factor's `φ` (inlet at 1) and `ψ` (outlet at 1) can be returned: both
+/// rates positive and finite, every pressure in `[0, 1]` (the maximum principle) to
+/// round-off, the first-order errors of the rates from the exact residuals,
+/// `ψ · (b_in − A φ)` and `φ · (b_out − A ψ)`, at most [`DIRECT_TRUST`] of them, and the
+/// rates agreeing to [`FLUX_AGREEMENT`]. The factor of the rounded matrix fails this when a
+/// region is joined to the rest only through faces below `ε` of its own (conductances
+/// spanning some sixteen decades or more).
+pub(super) fn trusted(
+    st: &assemble::Stencil,
+    b_in: &[f64],
+    b_out: &[f64],
+    x: &[f64],
+    psi: &[f64],
+) -> bool {
+    let (q_out, q_in) = (cg::dot(b_out, x), cg::dot(b_in, psi));
+    if !(q_out.is_finite() && q_in.is_finite() && q_out > 0.0 && q_in > 0.0) {
+        return false;
+    }
+    if !rates_agree(q_in, q_out) {
+        return false;
+    }
+    let in_range = |v: &[f64]| v.par_iter().all(|&t| (-1e-12..=1.0 + 1e-12).contains(&t));
+    if !(in_range(x) && in_range(psi)) {
+        return false;
+    }
+    let mut r = vec![0.0; x.len()];
+    st.residual_compensated(x, b_in, &mut r);
+    if cg::dot(psi, &r).abs() > DIRECT_TRUST * q_out {
+        return false;
+    }
+    st.residual_compensated(psi, b_out, &mut r);
+    cg::dot(x, &r).abs() <= DIRECT_TRUST * q_in
+}
+
+/// `φ`, `ψ`, the larger relative residual, and the low parts of `φ` and `ψ`.
+type GthOk = (Vec<f64>, Vec<f64>, f64, (Vec<f64>, Vec<f64>));
+
+/// Refinement steps of the low part after the cancellation-free elimination.
+pub(super) const REFINE_SPLIT: usize = 2;
+
+/// `φ` and `ψ` by the cancellation-free elimination ([`gth`]): both from right-hand sides
+/// `≥ 0`, so each rate is a sum of positive terms accurate to a few `n ε` however widely the
+/// conductances spread; the rates must still agree to [`FLUX_AGREEMENT`]. Returns the larger
+/// relative residual of the two solves.
+pub(super) fn solve_gth(
+    st: &assemble::Stencil,
+    b_in: &[f64],
+    b_out: &[f64],
+    room: Option<u64>,
+) -> Result<GthOk> {
+    let elim = match gth::Elimination::new(st, room) {
+        Ok(e) => e,
+        Err(Error::TooLarge { bytes, limit, what }) => {
+            return Err(Error::NotConverged {
+                iterations: 0,
+                residual: f64::NAN,
+                what: format!(
+                    "reynolds-flow sparse Cholesky: the factor's answer fails its checks (the \
+                     gap's conductances g³ span too many decades for it) and {what} is too \
+                     large here ({bytes} bytes for {limit} allowed, at most {} unknowns); \
+                     close the cells of negligible gap (e.g. set gaps below 1e-5 of the \
+                     largest to 0) or use a smaller grid",
+                    gth::MAX_UNKNOWNS
+                ),
+            })
+        }
+        Err(e) => return Err(e),
+    };
+    let n = b_in.len();
+    let (mut x, mut psi) = (vec![0.0; n], vec![0.0; n]);
+    elim.solve(b_in, &mut x);
+    elim.solve(b_out, &mut psi);
+    let (q_out, q_in) = (cg::dot(b_out, &x), cg::dot(b_in, &psi));
+    // Two refinement steps on the low part, residuals of `hi + lo` summed exactly: a pressure
+    // field whose cells balance to ~ε² of their conductances, not ε.
+    let rel = |r: &[f64], b: &[f64]| cg::dot(r, r).sqrt() / cg::dot(b, b).sqrt();
+    let refine = |hi: &[f64], b: &[f64]| {
+        let (mut lo, mut r, mut d) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
+        for _ in 0..REFINE_SPLIT {
+            st.residual_split(hi, &lo, b, &mut r);
+            elim.solve(&r, &mut d);
+            lo.iter_mut().zip(&d).for_each(|(l, v)| *l += v);
+        }
+        st.residual_split(hi, &lo, b, &mut r);
+        let res = rel(&r, b);
+        (lo, res)
+    };
+    let (xlo, rx) = refine(&x, b_in);
+    let (psilo, rpsi) = refine(&psi, b_out);
+    let residual = rx.max(rpsi);
+    if !(q_out.is_finite() && q_out > 0.0 && rates_agree(q_in, q_out)) {
+        return Err(Error::NotConverged {
+            iterations: 0,
+            residual,
+            what: format!(
+                "reynolds-flow elimination (inlet rate {q_in:e} and outlet rate {q_out:e} \
+                 differ)"
+            ),
+        });
+    }
+    Ok((x, psi, residual, (xlo, psilo)))
+}
+
+/// `Σ (1 − x_k) r_k`: to first order the error of the rate `w · x` of a solution `x` with
+/// residual `r`, since `w · (x* − x) = ψ* · r` with the adjoint `ψ* = A⁻¹ w = 1 − x*`.
+/// With `r = b_in` it is the inlet rate of `x`.
+pub(super) fn rate_error(x: &[f64], r: &[f64]) -> f64 {
+    let parts: Vec<f64> = x
+        .par_chunks(cg::CHUNK)
+        .zip(r.par_chunks(cg::CHUNK))
+        .map(|(xc, rc)| xc.iter().zip(rc).map(|(u, v)| (1.0 - u) * v).sum::<f64>())
+        .collect();
+    parts.iter().sum()
+}
+
+/// `φ` and `ψ` by multigrid-preconditioned CG with iterative refinement ([`cg::refined`]),
+/// each until its relative residual is `≤ tol` and its flow rate is accurate to `tol`
+/// (estimated from the exact residual by [`rate_error`]); then the inlet and outlet rates must agree to [`FLUX_AGREEMENT`]. The
+/// inner `Err` is the failure to report (or to recover from with the direct solver).
+type MultigridOk = (Vec<f64>, Vec<f64>, f64, usize);
+pub(super) fn solve_multigrid(
+    mg: &Multigrid,
+    b_in: &[f64],
+    b_out: &[f64],
+    opts: &Options<'_>,
+    max_iter: usize,
+) -> Result<std::result::Result<MultigridOk, Error>> {
+    let n = b_in.len();
+    let st = mg.fine();
+    let qtol = opts.tol;
+    let apply = |v: &[f64], out: &mut [f64]| st.apply(v, out);
+    let mut pre = |r: &[f64], z: &mut [f64]| mg.apply(r, z);
+    // The rate's first-order error at most `tol` of it, and the pressure change a Jacobi step
+    // would make, `max |r_k| / d_k`, at most `tol` (a dead end behind a narrow face has a
+    // small residual for a large pressure error).
+    fn accurate<'a>(
+        st: &'a assemble::Stencil,
+        w: &'a [f64],
+        qtol: f64,
+    ) -> impl Fn(&[f64], &[f64]) -> f64 + 'a {
+        move |x: &[f64], r: &[f64]| {
+            let jacobi = r
+                .par_chunks(cg::CHUNK)
+                .zip(st.d.par_chunks(cg::CHUNK))
+                .map(|(rc, dc)| {
+                    rc.iter()
+                        .zip(dc)
+                        .fold(0.0, |m: f64, (rv, dv)| m.max(rv.abs() / dv))
+                })
+                .reduce(|| 0.0, f64::max);
+            let rate = rate_error(x, r).abs() / (qtol * cg::dot(w, x).abs());
+            rate.max(jacobi / qtol)
+        }
+    }
+    let mut x = vec![0.0; n];
+    let exact = |x: &[f64], b: &[f64], r: &mut [f64]| st.residual_compensated(x, b, r);
+    let a = cg::refined(
+        &apply,
+        &exact,
+        &mut pre,
+        &accurate(st, b_out, qtol),
+        b_in,
+        &mut x,
+        opts.tol,
+        max_iter,
+        opts.should_stop,
+    )?;
+    let failed = |o: &cg::Outcome, what: &str| Error::NotConverged {
+        iterations: o.iterations,
+        residual: o.residual,
+        what: format!("reynolds-flow multigrid CG ({what})"),
+    };
+    if !a.converged {
+        return Ok(Err(failed(&a, "pressure")));
+    }
+    // ψ from 1 − φ: only the digits that φ cannot hold near 1 are left to find.
+    let mut psi: Vec<f64> = x
+        .par_iter()
+        .zip(st.active.par_iter())
+        .map(|(&v, &on)| if on { 1.0 - v } else { 0.0 })
+        .collect();
+    let b = cg::refined(
+        &apply,
+        &exact,
+        &mut pre,
+        &accurate(st, b_in, qtol),
+        b_out,
+        &mut psi,
+        opts.tol,
+        max_iter,
+        opts.should_stop,
+    )?;
+    let total = cg::Outcome {
+        iterations: a.iterations + b.iterations,
+        residual: a.residual.max(b.residual),
+        converged: b.converged,
+    };
+    if !b.converged {
+        return Ok(Err(failed(&total, "reversed pressure")));
+    }
+    let (q_out, q_in) = (cg::dot(b_out, &x), cg::dot(b_in, &psi));
+    if !rates_agree(q_in, q_out) {
+        return Ok(Err(failed(
+            &total,
+            &format!("inlet rate {q_in:e} and outlet rate {q_out:e} differ"),
+        )));
+    }
+    Ok(Ok((x, psi, total.residual, total.iterations)))
+}
+
+/// Bytes of a sparse Cholesky factor of `cells` unknowns (AMD on a 2-D grid: a few tens of
+/// entries, value and row index, per unknown).
+pub(super) fn cholesky_estimate(cells: usize) -> u64 {
+    40 * 16 * cells as u64
+}
+
+/// `MemAvailable` of `/proc/meminfo` (Linux), in bytes.
+pub(super) fn available_memory() -> Option<u64> {
+    let text = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let line = text.lines().find(|l| l.starts_with("MemAvailable:"))?;
+    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kib * 1024)
+}
