@@ -124,7 +124,10 @@ pub(super) fn scale(hs: f64, delta: f64, cap: f64, c00: f64) -> f64 {
     }
 }
 
-/// The capped iteration at the approach `delta` from `p0` (clamped into `[0, H]`).
+/// The capped iteration at the approach `delta` from `p0` (clamped into `[0, H]`), with the
+/// preconditioner `pre` when given. A preconditioned iteration that stalls (no new best
+/// certificate in [`super::PRECONDITION_STALL`] iterations) or does not converge is started
+/// over from `p0` with plain steps; the returned counts include both attempts.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn run(
     op: &Operator,
@@ -138,6 +141,60 @@ pub(super) fn run(
     opts: &Options,
     pre: Option<&Operator>,
     p0: Option<Vec<f64>>,
+) -> Result<Solution> {
+    if pre.is_none() {
+        let mut spent = [0; 2];
+        return run_steps(
+            op, table, problem, hmax, hs, c00, delta, cap, opts, None, p0, &mut spent,
+        );
+    }
+    let again = p0.clone();
+    let mut spent = [0; 2];
+    let first = run_steps(
+        op, table, problem, hmax, hs, c00, delta, cap, opts, pre, p0, &mut spent,
+    );
+    match first {
+        Err(Error::NotConverged { iterations, .. }) => {
+            let mut unused = [0; 2];
+            let mut sol = run_steps(
+                op,
+                table,
+                problem,
+                hmax,
+                hs,
+                c00,
+                delta,
+                cap,
+                opts,
+                None,
+                again,
+                &mut unused,
+            )?;
+            sol.iterations += iterations;
+            sol.fft_products += spent[0];
+            sol.preconditioner_products += spent[1];
+            Ok(sol)
+        }
+        other => other,
+    }
+}
+
+/// One attempt of [`run`]; a stalled attempt leaves its FFT products and preconditioner
+/// applications in `spent`.
+#[allow(clippy::too_many_arguments)]
+fn run_steps(
+    op: &Operator,
+    table: Option<&[f64]>,
+    problem: &Problem,
+    hmax: f64,
+    hs: f64,
+    c00: f64,
+    delta: f64,
+    cap: f64,
+    opts: &Options,
+    pre: Option<&Operator>,
+    p0: Option<Vec<f64>>,
+    spent: &mut [usize; 2],
 ) -> Result<Solution> {
     let (ny, nx) = (problem.ny, problem.nx);
     let n = ny * nx;
@@ -164,6 +221,7 @@ pub(super) fn run(
     let mut pre_applies = 0usize;
     let mut last_pre = false;
     let mut best_cert = f64::INFINITY;
+    let mut best_at = 0usize;
     // Influence table of the sparse corrections (built on first use when not given).
     let periodic = op.boundary == Boundary::Periodic;
     let sparse_max = pk::sparse_limit(op.boundary);
@@ -202,12 +260,24 @@ pub(super) fn run(
     let mut last_poll = Instant::now();
     loop {
         let cert = state.certificate() / sc;
+        if cert < best_cert {
+            best_cert = cert;
+            best_at = it;
+        }
+        if pre.is_some() && it - best_at > super::PRECONDITION_STALL {
+            // The preconditioned iteration stalls: the caller starts over with plain steps.
+            *spent = [applies, pre_applies];
+            return Err(Error::NotConverged {
+                iterations: it,
+                residual: cert,
+                what: "Polonsky–Keer with hardness (preconditioned steps stalled)".into(),
+            });
+        }
         if pre.is_some() && cert > super::PRECONDITION_SAFEGUARD * best_cert {
             // The preconditioned iteration is not contracting: finish with plain steps.
             pre = None;
             cg = false;
         }
-        best_cert = best_cert.min(cert);
         if cert <= opts.tol {
             if fresh {
                 break;

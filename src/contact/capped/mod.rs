@@ -51,6 +51,10 @@
 //! kind. The step stays plain where the elastic solver's does: a steepest-descent step (empty
 //! free set, or no descent), more than [`pk::PRECONDITION_MAX_FRACTION`] of the points free,
 //! and, for the rest of the solve, once the certificate grows past `10³×` its best value.
+//! A preconditioned solve whose certificate reaches no new best value in
+//! [`PRECONDITION_STALL`] iterations is started over from its start pressure with plain
+//! steps (seen once, on a periodic 128² surface with half its points at the hardness, where
+//! plain steps continuing from the stalled state cycle as well).
 //! Each preconditioned iteration costs one FFT pair on the unpadded grid. The answer is the
 //! same minimiser (identical contact and plastic sets in the tests).
 //!
@@ -104,6 +108,12 @@ const ELASTIC_START_TOL: f64 = 1e-6;
 /// A preconditioned capped solve whose certificate grows past this multiple of its best value
 /// so far continues with plain steps (the elastic solver's safeguard).
 const PRECONDITION_SAFEGUARD: f64 = 1e3;
+
+/// A preconditioned capped solve whose certificate has not reached a new best value for this
+/// many iterations is started over with plain steps (seen on a periodic 128² surface pressed
+/// to half its points at the hardness, where the preconditioned steps, and plain steps
+/// continuing from their state, cycle).
+const PRECONDITION_STALL: usize = 100;
 
 /// Root-search solves allowed in load control.
 const LOAD_MAX_SOLVES: usize = 200;
