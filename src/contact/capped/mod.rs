@@ -52,7 +52,7 @@
 //! free set, or no descent), more than [`pk::PRECONDITION_MAX_FRACTION`] of the points free,
 //! and, for the rest of the solve, once the certificate grows past `10³×` its best value.
 //! A preconditioned solve whose certificate reaches no new best value in
-//! [`PRECONDITION_STALL`] iterations is started over from its start pressure with plain
+//! 100 iterations (`PRECONDITION_STALL`) is started over from its start pressure with plain
 //! steps (seen once, on a periodic 128² surface with half its points at the hardness, where
 //! plain steps continuing from the stalled state cycle as well).
 //! Each preconditioned iteration costs one FFT pair on the unpadded grid. The answer is the
