@@ -271,8 +271,8 @@ class ContactProblem:
         ``hardness``: cap the pressure at ``p ≤ H`` (elastic–perfectly-plastic contact,
         ``docs/plasticity.md``; Polonsky–Keer only, ``"auto"`` resolves to it, the exact
         solvers are refused): points at ``p = H`` may have ``g < 0`` (plastic
-        interpenetration), ``plastic_points`` counts them. The preconditioner and chord steps
-        are not used then; the coarse start is kept. Load control requires
+        interpenetration), ``plastic_points`` counts them. The chord steps are not used then;
+        the preconditioner (on ``0 < p < H``) and the coarse start are kept. Load control requires
         ``mean_pressure ≤ hardness``. ``None``/``inf``: the elastic solve, bit for bit."""
 
 # ---- clusters ----

@@ -124,7 +124,10 @@ pub(super) fn scale(hs: f64, delta: f64, cap: f64, c00: f64) -> f64 {
     }
 }
 
-/// The capped iteration at the approach `delta` from `p0` (clamped into `[0, H]`).
+/// The capped iteration at the approach `delta` from `p0` (clamped into `[0, H]`), with the
+/// preconditioner `pre` when given. A preconditioned iteration that stalls (no new best
+/// certificate in [`super::PRECONDITION_STALL`] iterations) or does not converge is started
+/// over from `p0` with plain steps; the returned counts include both attempts.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn run(
     op: &Operator,
@@ -136,7 +139,62 @@ pub(super) fn run(
     delta: f64,
     cap: f64,
     opts: &Options,
+    pre: Option<&Operator>,
     p0: Option<Vec<f64>>,
+) -> Result<Solution> {
+    if pre.is_none() {
+        let mut spent = [0; 2];
+        return run_steps(
+            op, table, problem, hmax, hs, c00, delta, cap, opts, None, p0, &mut spent,
+        );
+    }
+    let again = p0.clone();
+    let mut spent = [0; 2];
+    let first = run_steps(
+        op, table, problem, hmax, hs, c00, delta, cap, opts, pre, p0, &mut spent,
+    );
+    match first {
+        Err(Error::NotConverged { iterations, .. }) => {
+            let mut unused = [0; 2];
+            let mut sol = run_steps(
+                op,
+                table,
+                problem,
+                hmax,
+                hs,
+                c00,
+                delta,
+                cap,
+                opts,
+                None,
+                again,
+                &mut unused,
+            )?;
+            sol.iterations += iterations;
+            sol.fft_products += spent[0];
+            sol.preconditioner_products += spent[1];
+            Ok(sol)
+        }
+        other => other,
+    }
+}
+
+/// One attempt of [`run`]; a stalled attempt leaves its FFT products and preconditioner
+/// applications in `spent`.
+#[allow(clippy::too_many_arguments)]
+fn run_steps(
+    op: &Operator,
+    table: Option<&[f64]>,
+    problem: &Problem,
+    hmax: f64,
+    hs: f64,
+    c00: f64,
+    delta: f64,
+    cap: f64,
+    opts: &Options,
+    pre: Option<&Operator>,
+    p0: Option<Vec<f64>>,
+    spent: &mut [usize; 2],
 ) -> Result<Solution> {
     let (ny, nx) = (problem.ny, problem.nx);
     let n = ny * nx;
@@ -154,6 +212,16 @@ pub(super) fn run(
     let mut t: Vec<f64> = alloc::try_zeroed(n, "the conjugate direction")?;
     let mut r: Vec<f64> = alloc::try_zeroed(n, "the operator work field")?;
     let mut applies = 0usize;
+    // The preconditioner `M = E*|q|/2` and its residual `z = M g` on the free set.
+    let mut pre = pre;
+    let mut z: Vec<f64> = match pre {
+        Some(_) => alloc::try_zeroed(n, "the preconditioned residual")?,
+        None => Vec::new(),
+    };
+    let mut pre_applies = 0usize;
+    let mut last_pre = false;
+    let mut best_cert = f64::INFINITY;
+    let mut best_at = 0usize;
     // Influence table of the sparse corrections (built on first use when not given).
     let periodic = op.boundary == Boundary::Periodic;
     let sparse_max = pk::sparse_limit(op.boundary);
@@ -192,6 +260,24 @@ pub(super) fn run(
     let mut last_poll = Instant::now();
     loop {
         let cert = state.certificate() / sc;
+        if cert < best_cert {
+            best_cert = cert;
+            best_at = it;
+        }
+        if pre.is_some() && it - best_at > super::PRECONDITION_STALL {
+            // The preconditioned iteration stalls: the caller starts over with plain steps.
+            *spent = [applies, pre_applies];
+            return Err(Error::NotConverged {
+                iterations: it,
+                residual: cert,
+                what: "Polonsky–Keer with hardness (preconditioned steps stalled)".into(),
+            });
+        }
+        if pre.is_some() && cert > super::PRECONDITION_SAFEGUARD * best_cert {
+            // The preconditioned iteration is not contracting: finish with plain steps.
+            pre = None;
+            cg = false;
+        }
         if cert <= opts.tol {
             if fresh {
                 break;
@@ -215,32 +301,53 @@ pub(super) fn run(
                 }
             }
         }
-        // Step 2.
+        // Step 2: preconditioned on a free set of at most half the points, plain otherwise.
         let n_free = state.n_c - state.n_pl;
         let mut steepest = n_free == 0;
+        let mut preconditioned = false;
         let mut gt = 0.0;
-        if !steepest {
-            let beta = if cg && g_old > 0.0 {
-                state.gg / g_old
-            } else {
-                0.0
-            };
-            gt = direction(&mut t, &p, &g, cap, beta, false);
-            if !positive(gt) {
-                steepest = true;
+        if let Some(m) = pre {
+            if !steepest && n_free as f64 <= pk::PRECONDITION_MAX_FRACTION * n as f64 {
+                let gz = precondition(m, &mut z, &mut r, &p, &g, cap, nx);
+                pre_applies += 1;
+                // β continues only a preconditioned sequence.
+                let beta = if cg && last_pre && g_old > 0.0 {
+                    gz / g_old
+                } else {
+                    0.0
+                };
+                gt = direction_preconditioned(&mut t, &z, &p, &g, cap, beta);
+                if positive(gt) && positive(gz) {
+                    preconditioned = true;
+                    g_old = gz;
+                }
             }
         }
-        if steepest {
-            gt = direction(&mut t, &p, &g, cap, 0.0, true);
+        if !preconditioned {
+            if !steepest {
+                let beta = if cg && !last_pre && g_old > 0.0 {
+                    state.gg / g_old
+                } else {
+                    0.0
+                };
+                gt = direction(&mut t, &p, &g, cap, beta, false);
+                if !positive(gt) {
+                    steepest = true;
+                }
+            }
+            if steepest {
+                gt = direction(&mut t, &p, &g, cap, 0.0, true);
+            }
+            if !positive(gt) {
+                return Err(Error::NotConverged {
+                    iterations: it,
+                    residual: cert,
+                    what: "Polonsky–Keer with hardness (no descent direction)".into(),
+                });
+            }
+            g_old = if steepest { gt } else { state.gg };
         }
-        if !positive(gt) {
-            return Err(Error::NotConverged {
-                iterations: it,
-                residual: cert,
-                what: "Polonsky–Keer with hardness (no descent direction)".into(),
-            });
-        }
-        g_old = if steepest { gt } else { state.gg };
+        last_pre = preconditioned;
         // Step 3.
         op.apply(&t, &mut r);
         applies += 1;
@@ -264,7 +371,10 @@ pub(super) fn run(
                 });
             }
         }
-        // Steps 4–5, with the incremental gap.
+        // Steps 4–5, with the incremental gap. A preconditioned `τ` is dimensionless: entries
+        // and releases move by `τ g / C_00` (the pressure that closes the gap of that point
+        // alone), as in the elastic solver.
+        let tau_ol = if preconditioned { tau / c00 } else { tau };
         let (up, changes) = {
             let (t, r) = (&t, &r);
             let parts: Vec<(Red, Vec<(usize, f64)>)> = p
@@ -280,10 +390,10 @@ pub(super) fn run(
                         let lin = pc[i] - tau * t[lo + i];
                         let mut pn = lin.clamp(0.0, cap);
                         if pn == 0.0 && gi < 0.0 {
-                            pn = (-tau * gi).min(cap);
+                            pn = (-tau_ol * gi).min(cap);
                             a.n_ol += 1;
                         } else if pn == cap && gi > 0.0 {
-                            pn = (cap - tau * gi).max(0.0);
+                            pn = (cap - tau_ol * gi).max(0.0);
                             a.n_ul += 1;
                         }
                         if pn != lin {
@@ -356,7 +466,7 @@ pub(super) fn run(
         approach: delta,
         iterations: it,
         fft_products: applies,
-        preconditioner_products: 0,
+        preconditioner_products: pre_applies,
         chord_steps: 0,
         kkt: state.certificate() / sc,
         contact_points: state.n_c,
@@ -387,6 +497,78 @@ fn direction(t: &mut [f64], p: &[f64], g: &[f64], cap: f64, beta: f64, steepest:
                 };
                 *ti = v;
                 s += gk * v;
+            }
+            s
+        })
+        .collect();
+    parts.iter().sum()
+}
+
+/// The preconditioned residual `z = M (g on F)` restricted to the free set `F = {0 < p < H}`
+/// (`r` is scratch); returns `Σ_F g z`. Rows without a free point skip their FFTs.
+fn precondition(
+    m: &Operator,
+    z: &mut [f64],
+    r: &mut [f64],
+    p: &[f64],
+    g: &[f64],
+    cap: f64,
+    nx: usize,
+) -> f64 {
+    let free = |v: f64| v > 0.0 && v < cap;
+    z.par_chunks_mut(CHUNK)
+        .zip(p.par_chunks(CHUNK))
+        .zip(g.par_chunks(CHUNK))
+        .for_each(|((zc, pc), gc)| {
+            for i in 0..zc.len() {
+                zc[i] = if free(pc[i]) { gc[i] } else { 0.0 };
+            }
+        });
+    let keep = |row: usize| p[row * nx..(row + 1) * nx].iter().any(|&v| free(v));
+    m.apply_on_rows(z, r, &keep);
+    let r = &*r;
+    let parts: Vec<f64> = z
+        .par_chunks_mut(CHUNK)
+        .enumerate()
+        .map(|(c, zc)| {
+            let lo = c * CHUNK;
+            let mut s = 0.0;
+            for (i, zi) in zc.iter_mut().enumerate() {
+                let v = if free(p[lo + i]) { r[lo + i] } else { 0.0 };
+                *zi = v;
+                s += g[lo + i] * v;
+            }
+            s
+        })
+        .collect();
+    parts.iter().sum()
+}
+
+/// Step 2 with the preconditioned residual: `t = z + β t` on the free set, 0 elsewhere;
+/// returns `Σ g t`.
+fn direction_preconditioned(
+    t: &mut [f64],
+    z: &[f64],
+    p: &[f64],
+    g: &[f64],
+    cap: f64,
+    beta: f64,
+) -> f64 {
+    let parts: Vec<f64> = t
+        .par_chunks_mut(CHUNK)
+        .enumerate()
+        .map(|(c, tc)| {
+            let lo = c * CHUNK;
+            let mut s = 0.0;
+            for (i, ti) in tc.iter_mut().enumerate() {
+                let k = lo + i;
+                let v = if p[k] > 0.0 && p[k] < cap {
+                    z[k] + beta * *ti
+                } else {
+                    0.0
+                };
+                *ti = v;
+                s += g[k] * v;
             }
             s
         })

@@ -189,3 +189,44 @@ fn infinite_hardness_is_the_elastic_solve_bit_for_bit() {
         .fold(0.0, f64::max);
     assert!(err < 1e-8 * pmax, "{err}");
 }
+
+#[test]
+fn preconditioned_and_plain_solves_agree() {
+    let (ny, nx) = (70, 66);
+    let h = rough(ny, nx, 11);
+    for boundary in [Boundary::Free, Boundary::Periodic] {
+        let problem = Problem {
+            heights: &h,
+            ny,
+            nx,
+            dx: 0.1,
+            e_star: 1.0,
+            boundary,
+        };
+        for (control, cap) in [
+            (Control::Approach(0.4), 0.05),
+            (Control::Approach(0.8), 0.1),
+            (Control::MeanPressure(0.01), 0.04),
+        ] {
+            let plain = Options {
+                precondition: false,
+                ..opts(cap)
+            };
+            let a = solve(&problem, control, &plain, None).unwrap();
+            let b = solve(&problem, control, &opts(cap), None).unwrap();
+            let what = format!("{boundary:?} {control:?} H = {cap}");
+            assert_eq!(a.preconditioner_products, 0, "{what}");
+            assert!(b.preconditioner_products > 0, "{what}");
+            assert!(b.plastic_points > 0, "{what}");
+            assert_eq!(a.contact_points, b.contact_points, "{what}");
+            assert_eq!(a.plastic_points, b.plastic_points, "{what}");
+            for (x, y) in a.pressure.iter().zip(&b.pressure) {
+                assert_eq!(*x > 0.0, *y > 0.0, "{what}: contact sets differ");
+                assert_eq!(*x >= cap, *y >= cap, "{what}: plastic sets differ");
+                assert!((x - y).abs() <= 1e-8 * cap, "{what}: {x} vs {y}");
+            }
+            let k = kkt_certificate_capped(&b.pressure, &b.gap, cap, 1.0);
+            assert!(k <= 1e-10, "{what}: {k}");
+        }
+    }
+}
