@@ -4,13 +4,15 @@ the flat punch, the uniform-pressure limit, the elastic limit and unloading."""
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 from scipy.optimize import brentq, minimize
 
 from leakpath import _core
 from leakpath.contact import ContactProblem, solve
-from leakpath.errors import InvalidArgumentError
+from leakpath.errors import InvalidArgumentError, SlopeWarning
 from leakpath.surfaces import Surface
 
 DX = 0.1
@@ -247,3 +249,31 @@ def test_load_above_hardness_and_exact_solvers_are_refused() -> None:
     # The module-level solve takes the hardness too.
     s = solve(Surface(rough(12, 2), DX), mean_pressure=0.05, hardness=0.1)
     assert s.hardness == 0.1 and s.pressure.max() <= 0.1
+
+
+def test_periodic_load_control_where_preconditioned_steps_stall() -> None:
+    """A periodic 128² load-controlled capped solve (H = 0.25 of the elastic maximum) on which
+    the preconditioned capped steps stall: the solve must still converge, to the same
+    minimiser as the plain capped iteration (same contact and plastic sets)."""
+    n, hurst = 128, 0.8
+    rng = np.random.default_rng(1)
+    k = np.hypot(*np.meshgrid(np.fft.fftfreq(n), np.fft.fftfreq(n), indexing="ij"))
+    k[0, 0] = 1.0
+    filt = k ** (-(1.0 + hurst))
+    filt[k < 4.0 / n] = (4.0 / n) ** (-(1.0 + hurst))
+    filt[0, 0] = 0.0
+    h = np.real(np.fft.ifft2(np.fft.fft2(rng.standard_normal((n, n))) * filt))
+    h /= h.std()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", SlopeWarning)
+        elastic = ContactProblem(Surface(h, 1.0), boundary="periodic").solve(mean_pressure=0.05)
+    cap = 0.25 * float(elastic.pressure.max())
+    core = _core.ContactProblem(h, 1.0, 1.0, "periodic")
+    pre = core.solve(mean_pressure=0.05, hardness=cap, solver="polonsky-keer")
+    plain = core.solve(mean_pressure=0.05, hardness=cap, solver="polonsky-keer", precondition=False)
+    assert pre.kkt <= 1e-10 and plain.kkt <= 1e-10
+    assert pre.preconditioner_products > 0
+    assert np.array_equal(pre.pressure > 0, plain.pressure > 0)
+    assert np.array_equal(pre.pressure >= cap, plain.pressure >= cap)
+    assert np.max(np.abs(pre.pressure - plain.pressure)) <= 1e-8 * cap
+    assert abs(pre.mean_pressure - 0.05) <= 1e-9 * 0.05
