@@ -84,20 +84,17 @@
 //!
 //! # Determinism
 //!
-//! Every reduction sums fixed chunks of [`CHUNK`] points, combined in chunk order.
+//! Every reduction sums fixed chunks of [`pk::CHUNK`] points, combined in chunk order.
 
 mod iteration;
 
-use rayon::prelude::*;
-
 use iteration::{positive, reduce, run, scale, Red};
 
-use super::polonsky_keer::{self as pk, coarse, CHUNK};
+use super::polonsky_keer::{self as pk, coarse};
 use super::problem::{CoarseCost, Control, Options, Problem, Solution, Solver};
-use crate::elastic::kernel::{love_displacement, Kernel};
+use crate::elastic::kernel::love_displacement;
 use crate::elastic::operator::Operator;
 use crate::error::{Error, Result};
-use crate::grid::Boundary;
 
 /// Relative accuracy of the mean pressure in load control (or the solve's `tol`, if larger).
 pub const LOAD_RTOL: f64 = 1e-10;
@@ -121,24 +118,6 @@ const LOAD_MAX_SOLVES: usize = 200;
 /// The finite hardness of `opts`, if any (`None` and `+∞` are the elastic problem).
 pub fn finite_hardness(opts: &Options) -> Option<f64> {
     opts.hardness.filter(|h| h.is_finite())
-}
-
-/// `(max h, max h − min h)`.
-fn height_range(h: &[f64]) -> (f64, f64) {
-    let (mx, mn) = h
-        .par_chunks(CHUNK)
-        .map(|c| {
-            c.iter()
-                .fold((f64::NEG_INFINITY, f64::INFINITY), |(a, b), &v| {
-                    (a.max(v), b.min(v))
-                })
-        })
-        .collect::<Vec<_>>()
-        .into_iter()
-        .fold((f64::NEG_INFINITY, f64::INFINITY), |(a, b), (c, d)| {
-            (a.max(c), b.min(d))
-        });
-    (mx, mx - mn)
 }
 
 /// The capped solve on a new operator built for `problem` (as [`pk::solve`]); `opts.hardness`
@@ -202,26 +181,9 @@ fn solve_level(
     initial: Option<&[f64]>,
     levels: usize,
 ) -> Result<Solution> {
-    let (ny, nx) = (problem.ny, problem.nx);
-    match problem.boundary {
-        Boundary::Free => {
-            let kernel = Kernel::try_new(ny, nx, problem.dx, problem.e_star)?;
-            let op = Operator::try_free(&kernel)?;
-            solve_with_operator(
-                &op,
-                Some(&kernel.table),
-                problem,
-                control,
-                opts,
-                initial,
-                levels,
-            )
-        }
-        Boundary::Periodic => {
-            let op = Operator::try_periodic(ny, nx, problem.dx, problem.e_star)?;
-            solve_with_operator(&op, None, problem, control, opts, initial, levels)
-        }
-    }
+    let (op, kernel) = pk::operator_for(problem)?;
+    let table = kernel.as_ref().map(|k| k.table.as_slice());
+    solve_with_operator(&op, table, problem, control, opts, initial, levels)
 }
 
 /// The capped solve on the caller's operator (checked by the caller), with its influence
@@ -237,7 +199,8 @@ fn solve_with_operator(
     levels: usize,
 ) -> Result<Solution> {
     let cap = finite_hardness(opts).expect("a capped solve needs a finite hardness");
-    let (hmax, hs) = height_range(problem.heights);
+    let (hmax, hmin, _) = pk::height_stats(problem.heights);
+    let hs = hmax - hmin;
     let c00 = love_displacement(0.0, 0.0, problem.dx, problem.e_star);
     // One preconditioner for every solve at this level (load control runs several).
     let pre = if opts.precondition {

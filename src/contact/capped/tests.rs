@@ -3,7 +3,9 @@
 use super::*;
 use crate::contact::kkt::kkt_certificate_capped;
 use crate::contact::polonsky_keer as pk;
+use crate::elastic::kernel::Kernel;
 use crate::elastic::operator::dense_apply;
+use crate::grid::Boundary;
 
 fn rough(ny: usize, nx: usize, seed: u64) -> Vec<f64> {
     let mut s = seed;

@@ -18,7 +18,7 @@ fn positive(x: f64) -> bool {
 }
 
 /// Deterministic `(max, min, Σ)` of the heights.
-pub(super) fn height_stats(h: &[f64]) -> (f64, f64, f64) {
+pub(crate) fn height_stats(h: &[f64]) -> (f64, f64, f64) {
     let parts: Vec<(f64, f64, f64)> = h
         .par_chunks(CHUNK)
         .map(|c| {

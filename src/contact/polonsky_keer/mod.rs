@@ -175,6 +175,7 @@ mod validate;
 use std::time::Duration;
 
 pub use coarse::{COARSE_START_MIN_SIDE, COARSE_TOL, MAX_COARSE_LEVELS};
+pub(crate) use driver::height_stats;
 use driver::{run, Begin};
 pub(crate) use sparse::add_sparse;
 pub use validate::check_hardness;
@@ -292,7 +293,6 @@ pub(crate) fn solve_level(
     levels: usize,
 ) -> Result<Solution> {
     validate_elastic(problem, control, opts, initial)?;
-    let (ny, nx) = (problem.ny, problem.nx);
     check_memory(problem, opts)?;
     // The coarse levels run before the fine operator exists, so their memory is not added
     // to its.
@@ -300,26 +300,26 @@ pub(crate) fn solve_level(
         initial,
         coarse_start(problem, control, opts, initial, levels)?,
     );
+    let (op, kernel) = operator_for(problem)?;
+    let table = kernel.as_ref().map(|k| k.table.as_slice());
+    run_from(&op, table, problem, control, opts, start, finish)
+}
+
+/// The FFT operator of `problem`, and (free boundary) the Love kernel it is built from, whose
+/// table is the influence table `C e_0` of the sparse corrections: kept instead of being
+/// rebuilt by a product. The periodic operator builds that table on first use.
+pub(crate) fn operator_for(problem: &Problem) -> Result<(Operator, Option<Kernel>)> {
+    let (ny, nx) = (problem.ny, problem.nx);
     match problem.boundary {
         Boundary::Free => {
-            // The Love kernel table is the influence table `C e_0` of the sparse corrections:
-            // kept instead of being rebuilt by a product.
             let kernel = Kernel::try_new(ny, nx, problem.dx, problem.e_star)?;
             let op = Operator::try_free(&kernel)?;
-            run_from(
-                &op,
-                Some(&kernel.table),
-                problem,
-                control,
-                opts,
-                start,
-                finish,
-            )
+            Ok((op, Some(kernel)))
         }
-        Boundary::Periodic => {
-            let op = Operator::try_periodic(ny, nx, problem.dx, problem.e_star)?;
-            run_from(&op, None, problem, control, opts, start, finish)
-        }
+        Boundary::Periodic => Ok((
+            Operator::try_periodic(ny, nx, problem.dx, problem.e_star)?,
+            None,
+        )),
     }
 }
 
