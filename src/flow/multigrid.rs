@@ -117,6 +117,10 @@ pub struct Multigrid {
     fine: Stencil,
     /// Grid cell of each fine unknown.
     cells: Vec<u32>,
+    /// Fine unknown of each grid cell ([`NONE`] without one).
+    index: Vec<u32>,
+    /// Entries off the diagonal of the finest level.
+    fine_entries: usize,
     levels: Vec<Graph>,
     /// `interps[l]`: `levels[l]` → `levels[l + 1]`.
     interps: Vec<Interp>,
@@ -198,8 +202,9 @@ impl Graph {
     }
 }
 
-/// The fine operator on its active cells: the graph and the cell of each unknown.
-fn fine_graph(st: &Stencil) -> (Graph, Vec<u32>) {
+/// The fine operator on its active cells: the graph, the cell of each unknown and the
+/// unknown of each cell.
+fn fine_graph(st: &Stencil) -> (Graph, Vec<u32>, Vec<u32>) {
     let n = st.ny * st.nx;
     let mut index = vec![NONE; n];
     let mut cells = Vec::new();
@@ -256,6 +261,7 @@ fn fine_graph(st: &Stencil) -> (Graph, Vec<u32>) {
             d,
         },
         cells,
+        index,
     )
 }
 
@@ -680,7 +686,7 @@ fn galerkin(g: &Graph, ip: &Interp, delta: &[f64], nc: usize) -> Graph {
 impl Multigrid {
     /// Builds the hierarchy below the fine operator `fine` (moved in).
     pub fn new(fine: Stencil) -> Self {
-        let (g0, cells) = fine_graph(&fine);
+        let (g0, cells, index) = fine_graph(&fine);
         let mut levels = vec![g0];
         let mut interps = Vec::new();
         loop {
@@ -712,9 +718,24 @@ impl Multigrid {
             })
             .collect();
         let coarse = DenseCholesky::new(levels.last().expect("non-empty"));
+        // The cycle applies the finest level from the grid stencil (the same faces), and no
+        // level needs its reservoir part any more: free them.
+        let fine_entries = levels[0].entries();
+        if levels.len() > 1 {
+            let g0 = &mut levels[0];
+            g0.ptr = Vec::new();
+            g0.col = Vec::new();
+            g0.w = Vec::new();
+            g0.d = Vec::new();
+        }
+        for g in levels.iter_mut() {
+            g.dir = Vec::new();
+        }
         Multigrid {
             fine,
             cells,
+            index,
+            fine_entries,
             levels,
             interps,
             bufs: Mutex::new(bufs),
@@ -734,9 +755,10 @@ impl Multigrid {
 
     /// Bytes held by the hierarchy (the fine stencil not counted).
     pub fn bytes(&self) -> u64 {
-        let g = |g: &Graph| 8 * g.ptr.len() + 12 * g.col.len() + 16 * g.n + 32 * g.n;
+        let g =
+            |g: &Graph| 8 * (g.ptr.len() + g.dir.len() + g.d.len()) + 12 * g.col.len() + 32 * g.n;
         let p = |p: &Interp| 8 * (p.ptr.len() + p.tptr.len()) + 24 * p.col.len();
-        (4 * self.cells.len()
+        (4 * (self.cells.len() + self.index.len())
             + self.levels.iter().map(g).sum::<usize>()
             + self.interps.iter().map(p).sum::<usize>()) as u64
     }
@@ -744,7 +766,8 @@ impl Multigrid {
     /// Operator complexity: entries (diagonal included) of all levels over the finest's.
     pub fn complexity(&self) -> f64 {
         let e = |g: &Graph| (g.entries() + g.n) as f64;
-        self.levels.iter().map(e).sum::<f64>() / e(&self.levels[0])
+        let fine = (self.fine_entries + self.levels[0].n) as f64;
+        (fine + self.levels[1..].iter().map(e).sum::<f64>()) / fine
     }
 
     /// The finest operator, the hierarchy dropped.
@@ -767,7 +790,18 @@ impl Multigrid {
                 .zip(cells.par_chunks(CHUNK))
                 .for_each(|(bc, cc)| bc.iter_mut().zip(cc).for_each(|(v, &k)| *v = r[k as usize]));
         }
-        vcycle(&self.levels, &self.interps, &mut bufs, &self.coarse);
+        let top = Fine {
+            st: &self.fine,
+            cells,
+            index: &self.index,
+        };
+        vcycle(
+            &self.levels,
+            &self.interps,
+            &mut bufs,
+            &self.coarse,
+            Some(&top),
+        );
         z.par_iter_mut().for_each(|v| *v = 0.0);
         let x = &bufs[0].x;
         // Scatter: each unknown's cell is distinct.
@@ -792,8 +826,88 @@ struct SharedMut(*mut f64);
 unsafe impl Send for SharedMut {}
 unsafe impl Sync for SharedMut {}
 
-/// One V-cycle on `levels[0]` for `bufs[0].b` into `bufs[0].x`.
-fn vcycle(levels: &[Graph], interps: &[Interp], bufs: &mut [Buffers], coarse: &DenseCholesky) {
+/// The finest level applied from the grid stencil: unknown `i` is cell `cells[i]`, its
+/// faces those of the stencil (to cells with unknowns only).
+struct Fine<'a> {
+    st: &'a Stencil,
+    cells: &'a [u32],
+    index: &'a [u32],
+}
+
+impl Fine<'_> {
+    /// `Σ_j w_ij x_j` of unknown `i` (cell `k`), `x_j` from `inside` for unknowns of the
+    /// block `i0..i0 + inside.len()` and from `outside` otherwise, and `Σ |w_ij|` over the
+    /// faces outside the block.
+    #[inline(always)]
+    fn row(&self, k: usize, i0: usize, inside: &[f64], outside: &[f64]) -> (f64, f64) {
+        let i1 = i0 + inside.len();
+        let (mut v, mut out) = (0.0, 0.0);
+        self.st.for_each_face(k, |l, c| {
+            let j = self.index[l];
+            if j == NONE {
+                return;
+            }
+            let j = j as usize;
+            let xj = if j >= i0 && j < i1 {
+                inside[j - i0]
+            } else {
+                out += c;
+                outside[j]
+            };
+            v += c * xj;
+        });
+        (v, out)
+    }
+
+    /// [`Graph::residual`] on the finest level.
+    fn residual(&self, x: &[f64], b: &[f64], r: &mut [f64]) {
+        r.par_chunks_mut(CHUNK).enumerate().for_each(|(blk, rc)| {
+            let i0 = blk * CHUNK;
+            for (t, rv) in rc.iter_mut().enumerate() {
+                let i = i0 + t;
+                let k = self.cells[i] as usize;
+                let (v, _) = self.row(k, 0, &[], x);
+                *rv = b[i] - self.st.d[k] * x[i] + v;
+            }
+        });
+    }
+
+    /// [`Graph::smooth`] on the finest level.
+    fn smooth(&self, b: &[f64], x: &mut [f64], old: &mut [f64], reverse: bool) {
+        old.copy_from_slice(x);
+        let old = &*old;
+        x.par_chunks_mut(CHUNK).enumerate().for_each(|(blk, xc)| {
+            let i0 = blk * CHUNK;
+            let m = xc.len();
+            let update = |t: usize, xc: &mut [f64]| {
+                let i = i0 + t;
+                let k = self.cells[i] as usize;
+                let (v, out) = self.row(k, i0, xc, old);
+                let d = self.st.d[k];
+                xc[t] += (b[i] - d * xc[t] + v) / (d + out);
+            };
+            if reverse {
+                for t in (0..m).rev() {
+                    update(t, xc);
+                }
+            } else {
+                for t in 0..m {
+                    update(t, xc);
+                }
+            }
+        });
+    }
+}
+
+/// One V-cycle on `levels[0]` for `bufs[0].b` into `bufs[0].x`; `fine`: `levels[0]` is the
+/// finest level, applied from the stencil.
+fn vcycle(
+    levels: &[Graph],
+    interps: &[Interp],
+    bufs: &mut [Buffers],
+    coarse: &DenseCholesky,
+    fine: Option<&Fine<'_>>,
+) {
     let (here, rest) = bufs.split_first_mut().expect("a level");
     if levels.len() == 1 {
         coarse.solve(&here.b, &mut here.x);
@@ -803,8 +917,16 @@ fn vcycle(levels: &[Graph], interps: &[Interp], bufs: &mut [Buffers], coarse: &D
     let ip = &interps[0];
     let Buffers { x, b, r, old } = here;
     x.par_iter_mut().for_each(|v| *v = 0.0);
-    g.smooth(b, x, old, false);
-    g.residual(x, b, r);
+    match fine {
+        Some(f) => {
+            f.smooth(b, x, old, false);
+            f.residual(x, b, r);
+        }
+        None => {
+            g.smooth(b, x, old, false);
+            g.residual(x, b, r);
+        }
+    }
     {
         let below = &mut rest[0];
         below
@@ -822,7 +944,7 @@ fn vcycle(levels: &[Graph], interps: &[Interp], bufs: &mut [Buffers], coarse: &D
                 }
             });
     }
-    vcycle(&levels[1..], &interps[1..], rest, coarse);
+    vcycle(&levels[1..], &interps[1..], rest, coarse, None);
     let xc = &rest[0].x;
     x.par_chunks_mut(CHUNK).enumerate().for_each(|(blk, xs)| {
         for (t, v) in xs.iter_mut().enumerate() {
@@ -834,7 +956,10 @@ fn vcycle(levels: &[Graph], interps: &[Interp], bufs: &mut [Buffers], coarse: &D
             *v += s;
         }
     });
-    g.smooth(b, x, old, true);
+    match fine {
+        Some(f) => f.smooth(b, x, old, true),
+        None => g.smooth(b, x, old, true),
+    }
 }
 
 /// Dense Cholesky factor of the coarsest level (at most a few hundred unknowns).
