@@ -59,6 +59,11 @@ def machine() -> str:
     return f"{cpu}, {os.cpu_count()} logical cores, {platform.system()} {platform.release()}"
 
 
+def label(asked: str, ran: str) -> str:
+    """The solver column: the one asked for, and the one that ran when they differ."""
+    return asked if asked == ran else f"{asked} → {ran}"
+
+
 def child(path: Path, solver: str) -> dict:
     env = dict(os.environ)
     r = subprocess.run(
@@ -88,8 +93,8 @@ def main() -> None:
         "",
         f"- machine: {machine()}; shared with other jobs (load average before: "
         f"{' '.join(f'{v:.2f}' for v in os.getloadavg())}), so times are noisy",
-        f"- leakpath {leakpath.__version__}, numpy {np.__version__}, "
-        f"Python {platform.python_version()}",
+        f"- leakpath {leakpath.__version__} (from `{Path(leakpath.__file__).parent}`), "
+        f"numpy {np.__version__}, Python {platform.python_version()}",
         f"- times: medians of {a.repeats} child processes (time of the `leakpath.flow` call); "
         "peak RSS: largest VmHWM of those children, and of a child that only loads the gap",
         "",
@@ -116,7 +121,7 @@ def main() -> None:
                     ref = q
                 diff = f"{abs(q - ref) / abs(ref):.1e}" if ref else ""
                 row = (f"| {case} | {info['contact_fraction']:.3f} | {ok[0]['unknowns']} | "
-                       f"{ok[0]['solver']} | {t:.2f} | {ok[0]['iterations']} | "
+                       f"{label(solver, ok[0]['solver'])} | {t:.2f} | {ok[0]['iterations']} | "
                        f"{rss:.0f} ({base:.0f}) | {q:.10e} | {diff} |")
             print(row, flush=True)
             lines.append(row)
