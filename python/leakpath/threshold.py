@@ -6,6 +6,8 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
+
 from . import _validate
 from .contact import DEFAULT_TOL, Boundary, ContactProblem, ContactState, SolverName
 from .errors import InvalidArgumentError
@@ -91,8 +93,10 @@ def percolation_threshold(
     ``warm_start`` (default): each solve starts from the pressure interpolated linearly in
     the approach between the two states bracketing it, ``p₀ = (1 − t)·p_lo + t·p_hi`` with
     ``t = (Δ − Δ_lo)/(Δ_hi − Δ_lo)`` (feasible, ``p₀ ≥ 0``, and close: the pressure grows
-    smoothly with the approach), or from the state below when no state above has been
-    solved yet; ``False`` solves each one from ``p = 0``. The result assumes the spanning
+    smoothly with the approach); while no state above has been solved, from the linear
+    extrapolation of the two solved states nearest below, ``max(p_lo + t·(p_lo − p_prev),
+    0)`` with ``t = (Δ − Δ_lo)/(Δ_lo − Δ_prev)`` (from the state below while it is the only
+    one); ``False`` solves each one from ``p = 0``. The result assumes the spanning
     property changes once along the approach, as it does when the contact set grows with it.
     """
     found = percolation_thresholds(
@@ -195,6 +199,16 @@ class _Search:
             if above is not None and above.approach > below.approach:
                 t = (approach - below.approach) / (above.approach - below.approach)
                 start = (1.0 - t) * below.pressure + t * above.pressure
+            else:
+                # Nothing solved above: extrapolate linearly from the two solved states
+                # nearest below, clipped at p = 0.
+                prev = [a for a in self.states if 0.0 < a < below.approach]
+                if prev:
+                    p_prev = self.states[max(prev)]
+                    t = (approach - below.approach) / (below.approach - p_prev.approach)
+                    start = np.maximum(
+                        below.pressure + t * (below.pressure - p_prev.pressure), 0.0
+                    )
         st = self.prob.solve(approach, solver=self.solver, warm_start=start, tol=self.tol)
         self.states[approach] = st
         return st
