@@ -139,6 +139,17 @@ def run_surface(args, seed):
     return row
 
 
+def seed_ranges(seeds):
+    """``0–9, 20–29`` for the sorted seeds."""
+    out, seeds = [], sorted(seeds)
+    for x in seeds:
+        if out and x == out[-1][1] + 1:
+            out[-1][1] = x
+        else:
+            out.append([x, x])
+    return ", ".join(f"{a}–{b}" if b > a else f"{a}" for a, b in out)
+
+
 def mean_se(values):
     v = [x for x in values if np.isfinite(x)]
     if len(v) < 2:
@@ -160,10 +171,11 @@ def write(args, rows, wall, load0, done):
         f"{len(rows)} of {args.surfaces} periodic spectral surfaces "
         f"{'(complete)' if done else '(run in progress or interrupted: partial results)'}, "
         f"H = 0.8, {n}², box L = {LENGTH:g} µm (dx = {dx:.4g} µm), rms height 1 µm, roll-off "
-        f"λ_r = {lam_r}, short cut-off λ_s = {lam_s:g}·dx, seeds {args.seed0}–"
-        f"{args.seed0 + len(rows) - 1}; leakpath {leakpath.__version__}; wall time "
-        f"{wall:.0f} s; RAYON_NUM_THREADS={os.environ.get('RAYON_NUM_THREADS', 'all cores')}; "
-        f"load average before {load0:.2f}, now {os.getloadavg()[0]:.2f} (2 cores shared with "
+        f"λ_r = {lam_r}, short cut-off λ_s = {lam_s:g}·dx, seeds "
+        f"{seed_ranges([r['seed'] for r in rows])}; leakpath {leakpath.__version__}; "
+        f"{'summed ' if args.merge else ''}wall time {wall:.0f} s; RAYON_NUM_THREADS="
+        f"{os.environ.get('RAYON_NUM_THREADS', 'all cores')}; load average before "
+        f"{load0:.2f}, now {os.getloadavg()[0]:.2f} (2 cores shared with "
         "other work).",
         "",
         "Contact fraction a_c at which the free region stops spanning (the first solved level "
@@ -182,9 +194,8 @@ def write(args, rows, wall, load0, done):
         ok = sum(c is True for c in checks)
         unresolved = sum(c is None for c in checks)
         note = f" ({unresolved} unresolved neck below)" if unresolved else ""
-        lines.append(
-            f"| {axis} | {k} | {m:.4f} | {sd:.4f} | {se:.4f} | {ok} of {len(rows)}{note} |"
-        )
+        passed = "—" if args.flow_check == "none" else f"{ok} of {len(rows)}{note}"
+        lines.append(f"| {axis} | {k} | {m:.4f} | {sd:.4f} | {se:.4f} | {passed} |")
         both.append(vals)
     if len(args.axes) > 1:
         per_surface = [float(np.mean(v)) for v in zip(*both, strict=True)]
@@ -197,7 +208,8 @@ def write(args, rows, wall, load0, done):
     }[args.flow_check]
     lines += [
         "",
-        f"Flow check: {check} (η = Δp = 1, flow tolerance {FLOW_TOL:g}).",
+        f"Flow check: {check}"
+        + ("." if args.flow_check == "none" else f" (η = Δp = 1, flow tolerance {FLOW_TOL:g})."),
         "",
         "| seed | axis | Δ_c (µm) | a_c | a below | solves | flow check | wall (s) |",
         "|---|---|---|---|---|---|---|---|",
@@ -249,8 +261,21 @@ def main() -> None:
         "--flow-check", choices=["bisection", "bracket", "none"], default="bisection"
     )
     ap.add_argument("--out", type=Path, default=Path("benchmarks/results/flow_threshold.md"))
+    ap.add_argument("--merge", type=Path, nargs="+", default=None,
+                    help="write --out from the .jsonl files of runs split by seed instead of "
+                    "running (give the same surface options as the runs)")
     args = ap.parse_args()
     load0 = os.getloadavg()[0]
+    if args.merge:
+        rows = [json.loads(line) for p in args.merge for line in p.read_text().splitlines()]
+        rows.sort(key=lambda r: r["seed"])
+        for r in rows:
+            r["points"] = []
+        args.seed0 = rows[0]["seed"]
+        write(args, rows, sum(r["seconds"] for r in rows), load0,
+              done=len(rows) >= args.surfaces)
+        print(f"wrote {args.out} from {len(rows)} surfaces")
+        return
     t0 = time.perf_counter()
     rows = []
     raw = args.out.with_suffix(".jsonl")
