@@ -448,6 +448,7 @@ def _api_cases(small: Surface) -> list[tuple[str, str, Any, Any]]:
         "spectral.rms_slope": lambda v: spectral(8, 0.8, seed=0, rms_slope=v),
         "spectral.long_cutoff": lambda v: spectral(8, 0.8, seed=0, long_cutoff=v),
         "spectral.short_cutoff": lambda v: spectral(8, 0.8, seed=0, short_cutoff=v),
+        "spectral.rolloff": lambda v: spectral(8, 0.8, seed=0, rolloff=v),
         "Surface.dx": lambda v: Surface(h, v),
         "ContactProblem.E": lambda v: ContactProblem(small, E=v),
         "ContactProblem.nu": lambda v: ContactProblem(small, nu=v),
@@ -516,7 +517,7 @@ def _api_cases(small: Surface) -> list[tuple[str, str, Any, Any]]:
                 bad += [1.0, 1.5]
             if arg == "D":
                 bad += [2.0, 3.0, 3.5]
-            if arg in ("rms_height", "rms_slope", "long_cutoff", "short_cutoff"):
+            if arg in ("rms_height", "rms_slope", "long_cutoff", "short_cutoff", "rolloff"):
                 bad = [v for v in bad if v is not None]
             if arg == "dx":
                 bad += [1e-200, 1e200]
@@ -524,8 +525,8 @@ def _api_cases(small: Surface) -> list[tuple[str, str, Any, Any]]:
                 bad += [1e300, 1e-300]  # beyond the solvers' floating-point range
         for v in bad:
             if v is None and arg in ("rms_height", "rms_slope", "long_cutoff", "short_cutoff",
-                                      "tol", "max_iter", "atol", "threads", "memory_limit",
-                                      "seed", "dx"):
+                                      "rolloff", "tol", "max_iter", "atol", "threads",
+                                      "memory_limit", "seed", "dx"):
                 continue  # None means "the default" there
             cases.append((key, arg, v, call))
     # Flat surfaces: refused, not solved to garbage.

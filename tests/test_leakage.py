@@ -173,12 +173,21 @@ def test_leak_stops_at_the_percolation_threshold(seed):
         assert (q > 0) == _bfs_spans(open_, periodic=True)
         return q > 0
 
+    def solve(a, lo_state, hi_state):
+        # percolation_threshold's starts: the pressure interpolated between the bracketing
+        # states (the state below while nothing above is solved); its KKT tolerance 1e-6.
+        start = lo_state if lo_state.approach > 0 else None
+        if start is not None and hi_state is not None:
+            t = (a - lo_state.approach) / (hi_state.approach - lo_state.approach)
+            start = (1 - t) * lo_state.pressure + t * hi_state.pressure
+        return prob.solve(a, solver="polonsky-keer", warm_start=start, tol=1e-6)
+
     lo_state = prob.solve(0.0, solver="polonsky-keer")
     assert leaks(lo_state)
     lo, hi, hi_state = 0.0, prob.max_approach, None
     while hi - lo > tol:
         mid = 0.5 * (lo + hi)
-        st = prob.solve(mid, solver="polonsky-keer", warm_start=lo_state if lo > 0 else None)
+        st = solve(mid, lo_state, hi_state)
         if leaks(st):
             lo, lo_state = mid, st
         else:

@@ -365,6 +365,113 @@ class TestSpectral:
             spectral(8, 0.5, seed=0, long_cutoff=0.49, short_cutoff=0.47)
 
 
+# ---------------------------------------------------------------------------- roll-off
+def _radial_fit(q, power, edges):
+    """Least-squares line through the log of the radially averaged periodogram in log-spaced
+    annuli: (slope, intercept) of ``log⟨|ĥ|²⟩`` against ``log⟨q⟩``."""
+    centres, means = [], []
+    for lo, hi in zip(edges[:-1], edges[1:], strict=True):
+        sel = (q >= lo) & (q < hi)
+        centres.append(np.mean(q[sel]))
+        means.append(np.mean(power[sel]))
+    return np.polyfit(np.log(centres), np.log(means), 1)
+
+
+class TestSpectralRolloff:
+    """The radially averaged periodogram (the oracle: numpy's FFT of the heights) of a surface
+    with a roll-off is flat between q_L and q_r and falls as q^(−2(1+H)) from q_r to q_s."""
+
+    N, LENGTH = 512, 500.0
+
+    @pytest.mark.parametrize("hurst", [0.8, 0.5])
+    def test_plateau_and_power_law(self, hurst):
+        qL = 2 * np.pi / self.LENGTH
+        qr, qs = 16 * qL, 128 * qL
+        plateau_slopes, law_slopes, ratios = [], [], []
+        for seed in range(6):
+            s = spectral(self.N, hurst, seed=seed, rms_height=0.5, rolloff=self.LENGTH / 16,
+                         short_cutoff=self.LENGTH / 128)
+            q = _wavevectors(s.shape, s.dx)
+            power = np.abs(np.fft.fft2(s.heights)) ** 2
+            # No energy outside [q_L, q_s].
+            outside = (q < qL * (1 - 1e-9)) | (q > qs * (1 + 1e-9))
+            assert np.max(power[outside]) < 1e-24 * np.max(power)
+            flat = _radial_fit(q, power, np.geomspace(qL * (1 - 1e-9), qr * (1 - 1e-9), 7))
+            law = _radial_fit(q, power, np.geomspace(qr * (1 - 1e-9), qs * (1 + 1e-9), 9))
+            plateau_slopes.append(flat[0])
+            law_slopes.append(law[0])
+            # The plateau's level is the power law's value at q_r: C(q) = C(q_r).
+            ratios.append(np.exp(np.polyval(flat, np.log(qr)) - np.polyval(law, np.log(qr))))
+            # Per surface: a flat plateau (a slope of −3.6 or −3 would be far outside) ...
+            assert abs(flat[0]) < 0.7, (seed, flat)
+            assert law[0] == pytest.approx(-2 * (1 + hurst), abs=0.15), (seed, law)
+        # ... and over the six surfaces, the slopes and the level within their sampling noise
+        # (per-surface spreads measured as 0.2, 0.03 and 0.2).
+        assert np.mean(plateau_slopes) == pytest.approx(0.0, abs=0.3), plateau_slopes
+        assert np.mean(law_slopes) == pytest.approx(-2 * (1 + hurst), abs=0.06), law_slopes
+        assert np.mean(ratios) == pytest.approx(1.0, abs=0.25), ratios
+
+    def test_documented_filter(self):
+        """The heights are the documented filter of the seed's white noise."""
+        shape, hurst, length = (48, 64), 0.7, 3.0
+        lam_l, lam_r, lam_s = 2.5, 0.75, 0.2
+        s = spectral(shape, hurst, seed=4, length=length, long_cutoff=lam_l, rolloff=lam_r,
+                     short_cutoff=lam_s, rms_height=0.01)
+        dx = length / shape[1]
+        w = np.random.default_rng(4).standard_normal(shape)
+        q = _wavevectors(shape, dx)
+        ql, qr, qs = (2 * np.pi / lam for lam in (lam_l, lam_r, lam_s))
+        a = np.where(q < qr, qr, q) ** (-(1 + hurst))
+        a[(q < ql) | (q > qs)] = 0.0
+        h = np.real(np.fft.ifft2(np.fft.fft2(w) * a))
+        h -= h.mean()
+        h *= 0.01 / np.sqrt(np.mean(h**2))
+        np.testing.assert_allclose(s.heights, h, rtol=0, atol=1e-14)
+        assert s.metadata["rolloff"] == lam_r
+
+    def test_default_unchanged(self):
+        """No roll-off, or a roll-off at the long cut-off, is the same surface bit for bit."""
+        plain = spectral((64, 80), 0.8, seed=3, rms_height=1.0)
+        at_long = spectral((64, 80), 0.8, seed=3, rms_height=1.0, rolloff=max(plain.length))
+        assert np.array_equal(plain.heights, at_long.heights)
+        assert plain.metadata["rolloff"] == plain.metadata["long_cutoff"]
+        # The default matches the documented filter without a plateau.
+        w = np.random.default_rng(3).standard_normal((64, 80))
+        q = _wavevectors((64, 80), plain.dx)
+        a = np.zeros_like(q)
+        band = (q >= 2 * np.pi / max(plain.length) * (1 - 1e-12)) & (q <= np.pi / plain.dx)
+        a[band] = q[band] ** -1.8
+        h = np.real(np.fft.ifft2(np.fft.fft2(w) * a))
+        h -= h.mean()
+        np.testing.assert_allclose(plain.heights, h / np.sqrt(np.mean(h**2)), atol=1e-12)
+
+    @pytest.mark.parametrize(
+        "kw, words",
+        [
+            ({"rolloff": 600.0}, "long_cutoff"),  # above the default long cut-off (box, 500)
+            ({"rolloff": 120.0, "long_cutoff": 100.0}, "long_cutoff"),
+            ({"rolloff": 10.0, "short_cutoff": 10.0}, "short_cutoff"),
+            ({"rolloff": 1.0}, "short_cutoff"),  # below the default 2·dx = 31.25
+            ({"rolloff": 0.0}, "rolloff"),
+            ({"rolloff": -50.0}, "rolloff"),
+            ({"rolloff": float("nan")}, "rolloff"),
+            ({"rolloff": float("inf")}, "rolloff"),
+        ],
+    )
+    def test_invalid_rolloff(self, kw, words):
+        with pytest.raises(ValueError, match=r"^rolloff\b") as exc:
+            spectral(32, 0.8, seed=0, **kw)
+        assert words in str(exc.value)
+        assert exc.value.argument == "rolloff"
+
+    def test_spec(self):
+        from leakpath.generators import generate, parse_spec
+
+        name, params, seed = parse_spec("spectral:n=64,hurst=0.8,seed=2,rolloff=125")
+        s = generate(name, params, seed)
+        assert np.array_equal(s.heights, spectral(64, 0.8, seed=2, rolloff=125.0).heights)
+
+
 # ---------------------------------------------------------------------------- files
 class TestSaveLoad:
     def test_npz_round_trip(self, tmp_path):

@@ -20,7 +20,7 @@ from .generators import rmd, spectral
 from .moments import Moments, nayak_moments, rms_height, rms_slope
 from .seal import SealConfig, SealResult, seal_leakage
 from .surfaces import Surface, load
-from .threshold import PercolationThreshold, percolation_threshold
+from .threshold import PercolationThreshold, percolation_threshold, percolation_thresholds
 
 __all__ = [
     "__version__",
@@ -38,6 +38,7 @@ __all__ = [
     "label",
     "percolation",
     "percolation_threshold",
+    "percolation_thresholds",
     "seal_leakage",
     "sweep",
     "rms_height",

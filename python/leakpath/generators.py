@@ -308,16 +308,23 @@ def spectral(
     rms_slope: float | None = None,
     long_cutoff: float | None = None,
     short_cutoff: float | None = None,
+    rolloff: float | None = None,
 ) -> Surface:
     """Periodic self-affine surface by Fourier filtering of white noise.
 
     With ``w`` a ``(ny, nx)`` array of standard normals from
     ``numpy.random.default_rng(seed).standard_normal((ny, nx))`` (one call)::
 
-        h = irfft2( A(q) · rfft2(w) ),   A(q) = |q|^(−(1+H))  for q_L ≤ |q| ≤ q_s, else 0
+        h = irfft2( A(q) · rfft2(w) ),   A(q) = q_r^(−(1+H))   for q_L ≤ |q| < q_r
+                                         A(q) = |q|^(−(1+H))   for q_r ≤ |q| ≤ q_s
+                                         A(q) = 0              otherwise
 
-    so the power spectrum is ``C(q) ∝ A² = |q|^(−2(1+H))`` inside the band and exactly zero
-    outside (including ``q = 0``, so the mean height is zero). Filtering real white noise
+    so the power spectrum ``C(q) ∝ A²`` is flat, ``C(q) = C(q_r)``, on the roll-off plateau
+    ``q_L ≤ |q| < q_r``, follows the self-affine power law ``C(q) ∝ |q|^(−2(1+H))`` for
+    ``q_r ≤ |q| ≤ q_s``, and is exactly zero outside the band (including ``q = 0``, so the
+    mean height is zero): the spectrum of Persson's and Müser's contact-mechanics challenge
+    surfaces. Without a roll-off (the default, ``q_r = q_L``) there is no plateau and the
+    power law spans the whole band. Filtering real white noise
     gives a Gaussian field with uniformly random phases whose spectrum is Hermitian by
     construction: the result is exactly real and exactly periodic (a finite sum of the
     grid's Fourier modes). It is then scaled by one constant to the requested rms height or
@@ -325,8 +332,9 @@ def spectral(
 
     **Wavevectors** are angular: ``q = 2π/λ`` in radians per length unit, with
     ``q_x = 2π·fftfreq(nx, dx)``, ``q_y = 2π·fftfreq(ny, dx)``; the cut-offs are given as
-    wavelengths, ``q_L = 2π/long_cutoff``, ``q_s = 2π/short_cutoff`` (the band edges are
-    inclusive, with a relative tolerance of 1e-12).
+    wavelengths, ``q_L = 2π/long_cutoff``, ``q_r = 2π/rolloff``, ``q_s = 2π/short_cutoff``
+    (the band edges are inclusive and the plateau ends below ``q_r``, each with a relative
+    tolerance of 1e-12).
 
     **Grid:** square pixels, ``dx = length / nx``; ``length`` is the size along x (axis 1)
     and the size along y is ``ny·dx``.
@@ -355,6 +363,12 @@ def spectral(
         lowest non-zero mode).
     short_cutoff : float, optional
         Shortest wavelength ``λ_s`` [unit]; default ``2·dx`` (the Nyquist wavelength).
+    rolloff : float, optional
+        Roll-off wavelength ``λ_r`` [unit], ``short_cutoff < λ_r ≤ long_cutoff``: the
+        spectrum is flat for wavelengths between ``λ_r`` and ``long_cutoff`` and a power law
+        below ``λ_r``. Default ``long_cutoff`` (no plateau, the same surface bit for bit as
+        without a roll-off). Contact-mechanics studies put it at a fraction of the box, e.g.
+        ``λ_r = L/4`` with ``long_cutoff = L``.
 
     Returns
     -------
@@ -365,8 +379,9 @@ def spectral(
     ------
     InvalidArgumentError (a ``ValueError``)
         ``hurst`` outside (0, 1); ``shape`` < 2 on an axis; both ``rms_height`` and
-        ``rms_slope`` given; non-positive values; ``short_cutoff >= long_cutoff``; a band
-        that contains no Fourier mode of the grid.
+        ``rms_slope`` given; non-positive values; ``short_cutoff >= long_cutoff``;
+        ``rolloff`` above ``long_cutoff`` or not above ``short_cutoff``; a band that contains
+        no Fourier mode of the grid.
     ProblemTooLargeError (a ``MemoryError``)
         A grid whose estimated peak memory (:data:`SPECTRAL_BYTES_PER_POINT` bytes per
         point) exceeds :func:`generator_memory_limit`, refused before allocating.
@@ -411,6 +426,20 @@ def spectral(
         raise InvalidArgumentError(
             f"short_cutoff: {lam_short!r} must be smaller than long_cutoff ({lam_long!r})"
         )
+    lam_roll = lam_long if rolloff is None else _check_positive_finite("rolloff", rolloff)
+    if not lam_roll <= lam_long:
+        raise InvalidArgumentError(
+            f"rolloff: {lam_roll!r} must not exceed long_cutoff ({lam_long!r}"
+            + (", the box size" if long_cutoff is None else "")
+            + "); the plateau lies between the roll-off and the long cut-off",
+            argument="rolloff",
+        )
+    if not lam_short < lam_roll:
+        raise InvalidArgumentError(
+            f"rolloff: {lam_roll!r} must be larger than short_cutoff ({lam_short!r}); the "
+            "power law lies between the short cut-off and the roll-off",
+            argument="rolloff",
+        )
     q_long = 2.0 * math.pi / lam_long
     q_short = 2.0 * math.pi / lam_short
 
@@ -425,6 +454,10 @@ def spectral(
         )
     amplitude = np.zeros_like(q)
     amplitude[band] = q[band] ** (-(1.0 + hurst_f))
+    if rolloff is not None:
+        q_roll = 2.0 * math.pi / lam_roll
+        plateau = band & (q < q_roll * (1.0 - 1e-12))
+        amplitude[plateau] = q_roll ** (-(1.0 + hurst_f))
 
     rng = np.random.default_rng(seed_i)
     white = rng.standard_normal((ny, nx))
@@ -451,6 +484,7 @@ def spectral(
         "length": length_f,
         "long_cutoff": lam_long,
         "short_cutoff": lam_short,
+        "rolloff": lam_roll,
         "rms_height": target_height,
         "rms_slope": target_slope,
         "wavevector": "q = 2*pi/lambda [rad/length]",
@@ -520,6 +554,7 @@ GENERATORS: dict[str, Generator] = {
             "rms_slope": float,
             "long_cutoff": float,
             "short_cutoff": float,
+            "rolloff": float,
         },
         ("shape", "hurst"),
         "spectral:n=256,hurst=0.8,seed=1",

@@ -32,6 +32,7 @@ def _cmd_surface_spectral(args: argparse.Namespace) -> int:
         rms_slope=args.rms_slope,
         long_cutoff=args.long_cutoff,
         short_cutoff=args.short_cutoff,
+        rolloff=args.rolloff,
     )
     return _write_and_report(surface, args)
 
@@ -91,6 +92,12 @@ def _add_surface_parser(subparsers: Any) -> None:
     s.add_argument("--long-cutoff", type=float, help="longest wavelength (default: the box size)")
     s.add_argument(
         "--short-cutoff", type=float, help="shortest wavelength (default: 2 dx, Nyquist)"
+    )
+    s.add_argument(
+        "--rolloff",
+        type=float,
+        help="roll-off wavelength: flat PSD between it and the long cut-off "
+        "(default: the long cut-off, no plateau)",
     )
     _add_output_arguments(s)
     s.set_defaults(func=_cmd_surface_spectral)
