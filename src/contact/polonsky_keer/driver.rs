@@ -276,7 +276,8 @@ pub(super) fn run(
         }
         last_pre = preconditioned;
 
-        // A chord step while the contact set is changing wholesale (displacement control):
+        // A chord step while the contact set is changing wholesale (both controls; under load
+        // control the trial is scaled to the load, so `Σ d = 0`):
         // the trial projected step `d = p(τ₀) − p` is applied through its own product `C d`,
         // so `g` stays exact with one product per iteration; the step length along `d` is
         // the exact minimiser of the energy on the chord, capped at 1 (feasible).

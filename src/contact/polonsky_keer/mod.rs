@@ -113,7 +113,7 @@
 //! step 1 (with the rescale of step 7 removing the round-off of `Σ p`). Without chord steps load
 //! control paid two products in most of its early iterations: at 1025² and 2049² (RMD
 //! D = 2.2, free, tol 1e-8, Δ = 0.6 h_s) 60 and 92 fine products against 43 and 65 under
-//! displacement control at the same contact state; with them 37 and 60.
+//! displacement control at the same contact state; with them 37 and 51.
 //!
 //! Measured at 4097² (RMD D = 2.1, free, Δ = 0.1/0.3/0.6 h_s, tol 1e-8, coarse start, 2
 //! cores): 56/132/202 fine iterations of which 34/69/117 chord steps, 64/167/260 fine
