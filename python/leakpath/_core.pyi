@@ -261,7 +261,7 @@ class ContactProblem:
         steps preconditioned with the inverse half-space compliance ``E*|q|/2`` on the
         contact set), ``coarse_start`` (a cold solve on a grid of at least 64 points per side
         starts from the solution on the grid coarsened by two, at most two levels deep, to KKT
-        ``1e-2``, prolonged bilinearly) and ``chord_steps`` (displacement control: while an
+        ``1e-2``, prolonged bilinearly) and ``chord_steps`` (while an
         iteration truncates or adds more than 0.5 % of the contact set, the next one is a
         chord step with one FFT product of the whole change and an exact line search).
         ``ProblemTooLargeError`` (a ``MemoryError``) up front when the solve would need more

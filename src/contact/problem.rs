@@ -165,7 +165,7 @@ pub struct Options<'a> {
     /// ([`crate::contact::polonsky_keer`]'s coarse levels); ignored with a warm start and on
     /// grids smaller than [`crate::contact::polonsky_keer::COARSE_START_MIN_SIDE`] per side.
     pub coarse_start: bool,
-    /// Take chord steps while the contact set changes wholesale (displacement control, see
+    /// Take chord steps while the contact set changes wholesale (both controls, see
     /// the module documentation); `false` keeps every iteration a regular Polonsky–Keer step.
     pub chord_steps: bool,
     /// Hardness `H`: cap the pressure at `p ≤ H` (elastic–perfectly-plastic contact, solved by

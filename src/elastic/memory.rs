@@ -112,6 +112,18 @@ mod tests {
     }
 
     #[test]
+    fn memory_estimate_8193_free_fits_a_24_gib_machine() {
+        // 8193² (2^13 + 1, padded FFT grid 16384²): the problem (kernel, operator, fields)
+        // and the Polonsky–Keer solve each stay well below the default limit of a 24 GiB
+        // machine (80 % of what is available), 9.0 and 7.3 GiB.
+        let problem = contact_problem(8193, 8193, Boundary::Free);
+        let solve = polonsky_keer(8193, 8193, Boundary::Free);
+        assert!(problem < 10 << 30, "{problem}");
+        assert!(solve < 8 << 30, "{solve}");
+        assert!(solve > 4 * polonsky_keer(4097, 4097, Boundary::Free) - (1 << 30));
+    }
+
+    #[test]
     fn operator_fits_inside_the_solver_estimates() {
         for b in [Boundary::Free, Boundary::Periodic] {
             let op = operator(257, 129, b);

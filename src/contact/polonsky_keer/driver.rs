@@ -190,7 +190,7 @@ pub(super) fn run(
     let mut last_poll = Instant::now();
     let mut best_cert = f64::INFINITY;
     // Chord steps (and the β = 0 that goes with them) only where they are taken.
-    let chords_on = opts.chord_steps && matches!(mode, Mode::Displacement(_));
+    let chords_on = opts.chord_steps;
     let mut chord = false;
     let mut chord_steps = 0usize;
     let (mut tau_pre, mut tau_plain) = (f64::NAN, f64::NAN);
@@ -276,7 +276,8 @@ pub(super) fn run(
         }
         last_pre = preconditioned;
 
-        // A chord step while the contact set is changing wholesale (displacement control):
+        // A chord step while the contact set is changing wholesale (both controls; under load
+        // control the trial is scaled to the load, so `Σ d = 0`):
         // the trial projected step `d = p(τ₀) − p` is applied through its own product `C d`,
         // so `g` stays exact with one product per iteration; the step length along `d` is
         // the exact minimiser of the energy on the chord, capped at 1 (feasible).
@@ -284,7 +285,10 @@ pub(super) fn run(
             let tau0 = if preconditioned { tau_pre } else { tau_plain };
             if tau0.is_finite() && tau0 > 0.0 {
                 let tau_ol0 = if preconditioned { tau0 / c00 } else { tau0 };
-                let trial = w.chord(tau0, tau_ol0);
+                let trial = match mode {
+                    Mode::Displacement(_) => w.chord(tau0, tau_ol0),
+                    Mode::Load(target) => w.chord_load(tau0, tau_ol0, target),
+                };
                 if trial.gt < 0.0 {
                     w.op.apply(&w.t, &mut w.r);
                     w.applies += 1;
@@ -294,7 +298,17 @@ pub(super) fn run(
                     } else {
                         1.0
                     };
-                    state = w.chord_update(s);
+                    state = match mode {
+                        Mode::Displacement(_) => w.chord_update(s),
+                        Mode::Load(target) => {
+                            // Σ d = 0: the new p keeps the load up to round-off, which the
+                            // rescale of step 7 removes (p and u together).
+                            let now = w.chord_update_load(s);
+                            let k = target / now.sum_p;
+                            delta = (now.sh + k * now.su) / now.n_c.max(1) as f64;
+                            w.gap_pass(delta, Some(k))
+                        }
+                    };
                     it += 1;
                     fresh = false;
                     cg = false;

@@ -9,6 +9,12 @@ use rayon::prelude::*;
 use super::{CHUNK, SPARSE_MAX};
 use crate::elastic::operator::Operator;
 
+/// `x > 0` and not NaN.
+#[inline]
+fn positive(x: f64) -> bool {
+    x > 0.0
+}
+
 /// What the iteration holds fixed: the approach, or the total `Σ p = p̄ N`.
 #[derive(Clone, Copy, Debug)]
 pub(super) enum Mode {
@@ -455,6 +461,75 @@ impl Work<'_> {
                     let gi = gc[i] + s * rc[i];
                     gc[i] = gi;
                     a.observe(pc[i], gi);
+                }
+                *acc = a;
+            });
+        combine(parts)
+    }
+
+    /// The trial of a load-controlled chord step: `p(τ)` = steps 5–6 applied to `p − τ t`,
+    /// scaled to the load, `p(τ) ← p(τ) · target / Σ p(τ)` (step 7), and `t ← d = p(τ) − p`,
+    /// so `Σ d = 0` and the chord keeps the load. Returns `Σ g d` (in `gt`; NaN when `p(τ)`
+    /// vanishes, which takes no chord step) and `n_nl` as [`Work::chord`].
+    pub(super) fn chord_load(&mut self, tau: f64, tau_ol: f64, target: f64) -> Acc {
+        let Work { p, g, t, parts, .. } = self;
+        let first = rewrite_t(parts, t, p, g, |_, pk, gk, tk, a| {
+            let lin = pk - tau * tk;
+            let pn = Self::step_point(lin, gk, tau_ol, a);
+            if pn != lin {
+                a.n_nl += 1;
+            }
+            a.sum_p += pn;
+            pn
+        });
+        if !positive(first.sum_p) {
+            let mut a = first;
+            a.gt = f64::NAN;
+            return a;
+        }
+        let s = target / first.sum_p;
+        let second = rewrite_t(parts, t, p, g, |_, pk, gk, tk, a| {
+            let d = s * tk - pk;
+            a.gt += gk * d;
+            d
+        });
+        Acc {
+            gt: second.gt,
+            ..first
+        }
+    }
+
+    /// The load-controlled chord step `p ← p + s d`, `u ← u + s r` with `d` in `t` and
+    /// `r = C d`. Returns `|I_c|`, `Σ p`, `Σ_{I_c} (max h − h)`, `Σ_{I_c} u` of the new state
+    /// (the gap is written by the following [`Work::gap_pass`]).
+    pub(super) fn chord_update_load(&mut self, s: f64) -> Acc {
+        let (h, hmax) = (self.h, self.hmax);
+        let Work {
+            p, u, t, r, parts, ..
+        } = self;
+        let (t, r) = (&*t, &*r);
+        parts
+            .par_iter_mut()
+            .zip(p.par_chunks_mut(CHUNK))
+            .zip(u.par_chunks_mut(CHUNK))
+            .enumerate()
+            .for_each(|(c, ((acc, pc), uc))| {
+                let lo = c * CHUNK;
+                let len = pc.len();
+                let (tc, rc, hc) = (&t[lo..lo + len], &r[lo..lo + len], &h[lo..lo + len]);
+                let mut a = Acc::ZERO;
+                for i in 0..len {
+                    if tc[i] != 0.0 {
+                        pc[i] = (pc[i] + s * tc[i]).max(0.0);
+                    }
+                    let ui = uc[i] + s * rc[i];
+                    uc[i] = ui;
+                    if pc[i] > 0.0 {
+                        a.n_c += 1;
+                        a.sum_p += pc[i];
+                        a.sh += hmax - hc[i];
+                        a.su += ui;
+                    }
                 }
                 *acc = a;
             });

@@ -1,0 +1,154 @@
+"""Large-grid elastic contact: displacement vs load control, FFT products, time and memory.
+
+Surface: ``leakpath.rmd(m, 2.2, seed=0)`` on ``(2^m + 1)²`` nodes, free boundary, Polonsky–Keer
+(``solver="polonsky-keer"``, preconditioned, coarse start, chord steps: the defaults) at KKT
+tolerance ``--tol`` (default 1e-8, relative to the height range). For each size and each
+approach ``Δ = f · h_s`` (``h_s`` the rms height, ``f`` from ``--deltas``):
+
+* displacement control at ``Δ``;
+* load control at the mean pressure ``p̄`` the displacement solve returned (the same contact
+  state), so the two times compare like for like.
+
+Every (size, Δ, control) runs in a fresh Python process (its peak RSS is that solve's, plus the
+surface and the problem); the time is the median of ``--repeats`` solves on one problem
+(the problem's kernel and operator are built once, outside the timing). FFT products are
+counted in products of the padded fine grid: ``fft_products`` of the fine solve plus the coarse
+levels' ``fft_products_fine_equivalent`` (``Σ products · N_level / N``).
+
+Run: ``python benchmarks/contact_scale_bench.py --sizes 1025 2049 --deltas 0.1 0.3 0.6
+--repeats 3 [--out benchmarks/results/contact_scale_after.json]``. Prints one row per
+solve and, with ``--out``, writes the rows as JSON lines.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import resource
+import statistics
+import subprocess
+import sys
+import time
+
+import numpy as np
+
+
+def worker(n: int, frac: float, control: str, pbar: float | None, repeats: int, tol: float) -> dict:
+    import leakpath
+    from leakpath import _core
+
+    m = int(round(np.log2(n - 1)))
+    s = leakpath.rmd(m, 2.2, seed=0)
+    h = np.ascontiguousarray(s.heights, dtype=np.float64)
+    hs = float(np.sqrt(((h - h.mean()) ** 2).mean()))
+    prob = _core.ContactProblem(h, s.dx, 1.0, "free")
+    times = []
+    out = None
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        if control == "displacement":
+            out = prob.solve(approach=frac * hs, solver="polonsky-keer", tol=tol)
+        else:
+            out = prob.solve(mean_pressure=pbar, solver="polonsky-keer", tol=tol)
+        times.append(time.perf_counter() - t0)
+    assert out is not None
+    rss_kib = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return {
+        "size": n,
+        "delta_over_hs": frac,
+        "control": control,
+        "seconds_median": statistics.median(times),
+        "seconds_all": times,
+        "iterations": out.iterations,
+        "chord_steps": out.chord_steps,
+        "fft_products": out.fft_products,
+        "coarse_fft_products_fine_eq": out.coarse.fft_products_fine_equivalent,
+        "products_fine_total": out.fft_products + out.coarse.fft_products_fine_equivalent,
+        "preconditioner_products": out.preconditioner_products,
+        "contact_fraction": out.contact_points / h.size,
+        "mean_pressure": out.mean_pressure,
+        "approach_over_hs": out.approach / hs,
+        "kkt": out.kkt,
+        "peak_rss_gib": rss_kib / 2**20,
+    }
+
+
+def machine() -> str:
+    import leakpath
+
+    load = os.getloadavg()
+    return (
+        f"{platform.node()} {platform.machine()}, {os.cpu_count()} cores (shared), "
+        f"load average {load[0]:.2f}/{load[1]:.2f}/{load[2]:.2f}, Python "
+        f"{platform.python_version()}, numpy {np.__version__}, leakpath "
+        f"{getattr(leakpath, '__version__', '?')}, solver threads "
+        f"{leakpath._core.solver_threads()}"
+    )
+
+
+def run_one(args, n: int, frac: float, control: str, pbar: float | None) -> dict:
+    cmd = [
+        sys.executable,
+        __file__,
+        "--worker",
+        json.dumps([n, frac, control, pbar, args.repeats, args.tol]),
+    ]
+    res = subprocess.run(cmd, capture_output=True, text=True, check=False)
+    if res.returncode != 0:
+        return {"size": n, "delta_over_hs": frac, "control": control, "error": res.stderr[-2000:]}
+    return json.loads(res.stdout.strip().splitlines()[-1])
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--sizes", type=int, nargs="+", default=[1025, 2049])
+    ap.add_argument("--deltas", type=float, nargs="+", default=[0.1, 0.3, 0.6])
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--tol", type=float, default=1e-8)
+    ap.add_argument(
+        "--controls", nargs="+", default=["displacement", "load"], choices=["displacement", "load"]
+    )
+    ap.add_argument("--out", type=str, default=None, help="append JSON lines here")
+    ap.add_argument("--worker", type=str, default=None, help=argparse.SUPPRESS)
+    args = ap.parse_args()
+    if args.worker is not None:
+        n, frac, control, pbar, repeats, tol = json.loads(args.worker)
+        print(json.dumps(worker(n, frac, control, pbar, repeats, tol)))
+        return
+    print(f"# {machine()}", flush=True)
+    print(
+        "# size | Δ/h_s | control | s (median) | iterations (chord) | products fine + coarse "
+        "= total [padded fine grid] | contact fraction | peak RSS [GiB]",
+        flush=True,
+    )
+    for n in args.sizes:
+        for frac in args.deltas:
+            pbar = None
+            for control in args.controls:
+                if control == "load" and pbar is None:
+                    d = run_one(args, n, frac, "displacement", None)
+                    pbar = d.get("mean_pressure")
+                row = run_one(args, n, frac, control, pbar)
+                row["machine"] = machine()
+                if "error" in row:
+                    print(f"{n} | {frac} | {control} | ERROR {row['error']}", flush=True)
+                else:
+                    if control == "displacement":
+                        pbar = row["mean_pressure"]
+                    print(
+                        f"{n} | {frac} | {control} | {row['seconds_median']:.2f} s | "
+                        f"{row['iterations']} ({row['chord_steps']}) | {row['fft_products']} + "
+                        f"{row['coarse_fft_products_fine_eq']:.1f} = "
+                        f"{row['products_fine_total']:.1f} | {row['contact_fraction']:.4f} | "
+                        f"{row['peak_rss_gib']:.2f}",
+                        flush=True,
+                    )
+                if args.out:
+                    with open(args.out, "a") as f:
+                        f.write(json.dumps(row) + "\n")
+
+
+if __name__ == "__main__":
+    main()
