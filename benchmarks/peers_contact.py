@@ -54,6 +54,7 @@ import json
 import math
 import os
 import platform
+import signal
 import statistics
 import subprocess
 import sys
@@ -180,6 +181,7 @@ def surface(n: int, hs_kind: str, cache: Path) -> Path:
     """The cropped RMD surface of ``n = 2^m`` points a side, cached as .npz."""
     path = cache / f"rmd_{n}_{hs_kind}.npz"
     if not path.exists():
+        sys.path.insert(0, str(ROOT / "python"))
         import leakpath
 
         m = int(round(math.log2(n)))
@@ -212,7 +214,12 @@ def measure(a, code, spec, path, fields, label, n) -> dict:
     return row
 
 
+def _interrupt(signum, frame):
+    raise KeyboardInterrupt
+
+
 def main() -> None:
+    signal.signal(signal.SIGTERM, _interrupt)  # a stopped run still writes what it measured
     ap = argparse.ArgumentParser(description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--sizes", type=int, nargs="+", default=[256, 512, 1024, 2048])
@@ -239,6 +246,15 @@ def main() -> None:
     load_before = loadavg()
     started = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
     rows = []
+    note = ""
+    try:
+        measure_all(a, backends, rows)
+    except KeyboardInterrupt:
+        note = "interrupted: cases after the last row were not measured"
+    write(a, rows, started, load_before, loadavg(), note)
+
+
+def measure_all(a, backends, rows) -> None:
     for n in sorted(a.sizes):
         path = surface(n, a.hs, a.cache)
         d = np.load(path)
@@ -282,10 +298,9 @@ def main() -> None:
                         r["dapp"] = (r["approach"] - rr["approach"]) / scale
                     Path(fields).unlink()
                 rows.append(r)
-    write(a, rows, started, load_before, loadavg())
 
 
-def write(a, rows, started, load_before, load_after) -> None:
+def write(a, rows, started, load_before, load_after, note="") -> None:
     lines = [
         f"\n## Run of {started}\n",
         f"- command: `{' '.join([Path(sys.executable).name] + sys.argv)}`",
@@ -295,6 +310,7 @@ def write(a, rows, started, load_before, load_after) -> None:
         f"tolerance {a.tol:g} in each code's own measure; h_s = "
         f"{'max h − min h' if a.hs == 'range' else 'rms height'}",
         f"- versions: {versions(a.python)}",
+    ] + ([f"- **{note}**"] if note else []) + [
         "",
         "| size | case | code | median s | peak MiB | iterations | own tol. measure | "
         "KKT/h_s | contact fraction | p̄ | approach/h_s | Δa | cells differing | ‖Δp‖ "

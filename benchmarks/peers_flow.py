@@ -43,6 +43,7 @@ import argparse
 import json
 import os
 import platform
+import signal
 import statistics
 import subprocess
 import sys
@@ -192,7 +193,12 @@ def available(python: str, module: str) -> bool:
     return r.returncode == 0
 
 
+def _interrupt(signum, frame):
+    raise KeyboardInterrupt
+
+
 def main() -> None:
+    signal.signal(signal.SIGTERM, _interrupt)  # a stopped run still writes what it measured
     ap = argparse.ArgumentParser(description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--sizes", type=int, nargs="+", default=[257, 513, 1025, 2049])
@@ -208,7 +214,12 @@ def main() -> None:
     ap.add_argument("--petsc-python", default="/work/benchvenv-peers-petsc/bin/python",
                     help="interpreter with reynoldsflow and petsc4py ('' to skip PETSc)")
     ap.add_argument("--threads", type=int, default=1)
-    ap.add_argument("--timeout", type=float, default=1800.0, help="per child, s")
+    ap.add_argument("--timeout", type=float, default=900.0, help="per child, s")
+    ap.add_argument("--single-above", type=float, default=60.0,
+                    help="a solve slower than this (s) is not repeated")
+    ap.add_argument("--growth", type=float, default=6.0,
+                    help="a method is skipped at the next size when its time there times "
+                         "this factor exceeds --timeout")
     ap.add_argument("--out", type=Path, default=ROOT / "benchmarks/results/peers_flow.md")
     a = ap.parse_args()
 
@@ -228,6 +239,16 @@ def main() -> None:
     load_before = loadavg()
     started = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
     rows = []
+    note = ""
+    try:
+        measure_all(a, methods, rows)
+    except KeyboardInterrupt:
+        note = "interrupted: sizes and solvers after the last row were not measured"
+    write(a, rows, started, load_before, loadavg(), petsc_py, note)
+
+
+def measure_all(a, methods, rows) -> None:
+    last: dict[str, float] = {}  # method -> median s at the previous size
     for n in sorted(a.sizes):
         path = a.cache / f"spectral_{n}_{a.separation}.npz"
         if not path.exists():
@@ -236,12 +257,19 @@ def main() -> None:
         base = child(a.python, "leakpath", "load", path, a.threads, a.timeout)
         base_mib = base.get("vmhwm_kib", 0) / 1024
         for code, solver, py in methods:
+            key = f"{code}:{solver}"
+            if key in last and last[key] * a.growth > a.timeout:
+                rows.append(dict(n=n, code=code, solver=solver, base_mib=base_mib, runs=0,
+                                 error=f"skipped: {last[key]:.0f} s at the previous size, "
+                                 f"projected above the {a.timeout:.0f} s timeout"))
+                print(n, key, "skipped", flush=True)
+                continue
             runs = []
-            for _ in range(a.repeats):
+            for k in range(a.repeats):
                 r = child(py, code, solver, path, a.threads, a.timeout)
                 runs.append(r)
                 print(n, code, solver, json.dumps(r), flush=True)
-                if "error" in r:
+                if "error" in r or (k == 0 and r["seconds"] > a.single_above):
                     break
             ok = [r for r in runs if "error" not in r]
             row = dict(n=n, code=code, solver=solver, base_mib=base_mib, runs=len(runs))
@@ -253,10 +281,10 @@ def main() -> None:
                     Q=ok[0]["Q"], unknowns=ok[0]["unknowns"], ran=ok[0].get("ran", ""),
                     iterations=ok[0].get("iterations"), ok=len(ok),
                 )
+                last[key] = row["seconds"]
             if len(ok) < len(runs):
                 row["error"] = [r for r in runs if "error" in r][0]["error"]
             rows.append(row)
-    write(a, rows, started, load_before, loadavg(), petsc_py)
 
 
 def fmt_q(q: float | None, ref: float | None) -> str:
@@ -265,22 +293,23 @@ def fmt_q(q: float | None, ref: float | None) -> str:
     return f"{abs(q - ref) / ref:.1e}"
 
 
-def write(a, rows, started, load_before, load_after, petsc_py) -> None:
+def write(a, rows, started, load_before, load_after, petsc_py, note="") -> None:
     lines = [
         f"\n## Run of {started}\n",
         f"- command: `{' '.join([Path(sys.executable).name] + sys.argv)}`",
         f"- machine: {machine()}; **shared with other jobs** (load average before "
         f"{load_before}, after {load_after}): absolute times are noisy, ratios less so",
-        f"- threads per solve: {a.threads}; medians of {a.repeats} child processes",
-    ]
+        f"- threads per solve: {a.threads}; medians of {a.repeats} child processes (one "
+        f"child when the first took over {a.single_above:g} s: column 'runs')",
+    ] + ([f"- **{note}**"] if note else [])
     for k, v in versions(a.python, petsc_py).items():
         lines.append(f"- {k}: {v}")
     lines += [
         "- gaps: `" + f"{a.cache}/spectral_N_{a.separation}.npz" + "` (benchmarks/flow_gaps.py)",
         "",
-        "| size | unknowns | code | solver | median s | peak MiB | Q | Q rel. diff "
+        "| size | unknowns | code | solver | runs | median s | peak MiB | Q | Q rel. diff "
         "vs leakpath auto |",
-        "|---|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     by_n: dict[int, list[dict]] = {}
     for r in rows:
@@ -293,11 +322,12 @@ def write(a, rows, started, load_before, load_after, petsc_py) -> None:
                                   and r["solver"] == "auto" and r.get("ran") else "")
             if "seconds" in r:
                 lines.append(
-                    f"| {n}² | {r['unknowns']} | {r['code']} | {name} | {r['seconds']:.3f} "
+                    f"| {n}² | {r['unknowns']} | {r['code']} | {name} | {r['ok']} "
+                    f"| {r['seconds']:.3f} "
                     f"| {r['peak_mib']:.0f} | {r['Q']:.10e} | {fmt_q(r['Q'], ref)} |"
                 )
             else:
-                lines.append(f"| {n}² | — | {r['code']} | {name} | failed: "
+                lines.append(f"| {n}² | — | {r['code']} | {name} | {r['runs']} | "
                              f"{r.get('error', '?')[:120]} | — | — | — |")
     lines += ["", "Best of each code per size (median s; ratio = peer best / leakpath best, "
               "> 1: leakpath faster):", "",
