@@ -22,7 +22,9 @@ only ``g ≤ 0``: its gap is ``g`` with the contact cells set to 0 (a contact so
 round-off up to ~1e-12 on them, which it would otherwise count as open cells). Both then
 solve on the cells of the spanning clusters (the same count), and ``Q`` is the volume rate
 through the outlet (ReynoldsFlow: the mean of its inlet and outlet rates from
-``compute_total_flux``).
+``compute_total_flux``). ``inlet/outlet rel. diff`` is each code's own check of that rate:
+``|Q − Q_in|/Q`` for leakpath, the ``conservation`` error ``compute_total_flux`` returns
+(``|Q_in − Q_out|/Q``) for ReynoldsFlow.
 
 Each measurement is one child process: imports, the gap loaded, one warm-up solve of the
 same solver on a 32² gap with a dead end and an island (ReynoldsFlow compiles its Numba
@@ -279,12 +281,18 @@ def measure_all(a, methods, rows) -> None:
                     peak_mib=statistics.median(r["vmhwm_kib"] for r in ok) / 1024,
                     warm_mib=statistics.median(r.get("warm_kib", 0) for r in ok) / 1024,
                     Q=ok[0]["Q"], unknowns=ok[0]["unknowns"], ran=ok[0].get("ran", ""),
+                    inout=(abs(ok[0]["Q"] - ok[0]["Q_in"]) / ok[0]["Q"] if "Q_in" in ok[0]
+                           else ok[0].get("conservation")),
                     iterations=ok[0].get("iterations"), ok=len(ok),
                 )
                 last[key] = row["seconds"]
             if len(ok) < len(runs):
                 row["error"] = [r for r in runs if "error" in r][0]["error"]
             rows.append(row)
+
+
+def fmt_e(x: float | None) -> str:
+    return "—" if x is None else f"{x:.1e}"
 
 
 def fmt_q(q: float | None, ref: float | None) -> str:
@@ -308,8 +316,8 @@ def write(a, rows, started, load_before, load_after, petsc_py, note="") -> None:
         "- gaps: `" + f"{a.cache}/spectral_N_{a.separation}.npz" + "` (benchmarks/flow_gaps.py)",
         "",
         "| size | unknowns | code | solver | runs | median s | peak MiB | Q | Q rel. diff "
-        "vs leakpath auto |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "vs leakpath auto | inlet/outlet rel. diff |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
     by_n: dict[int, list[dict]] = {}
     for r in rows:
@@ -324,11 +332,12 @@ def write(a, rows, started, load_before, load_after, petsc_py, note="") -> None:
                 lines.append(
                     f"| {n}² | {r['unknowns']} | {r['code']} | {name} | {r['ok']} "
                     f"| {r['seconds']:.3f} "
-                    f"| {r['peak_mib']:.0f} | {r['Q']:.10e} | {fmt_q(r['Q'], ref)} |"
+                    f"| {r['peak_mib']:.0f} | {r['Q']:.10e} | {fmt_q(r['Q'], ref)} "
+                    f"| {fmt_e(r.get('inout'))} |"
                 )
             else:
                 lines.append(f"| {n}² | — | {r['code']} | {name} | {r['runs']} | "
-                             f"{r.get('error', '?')[:120]} | — | — | — |")
+                             f"{r.get('error', '?')[:120]} | — | — | — | — |")
     lines += ["", "Best of each code per size (median s; ratio = peer best / leakpath best, "
               "> 1: leakpath faster):", "",
               "| size | leakpath best | s | ReynoldsFlow best | s | ratio |",
