@@ -200,7 +200,7 @@ def measure(a, code, spec, path, fields, label, n) -> dict:
         r = child(a.python, code, spec, path, fields if k == 0 else "", a.threads, a.timeout)
         runs.append(r)
         print(n, label, json.dumps(r), flush=True)
-        if "error" in r:
+        if "error" in r or (k == 0 and r["seconds"] > a.single_above):
             break
     ok = [r for r in runs if "error" not in r]
     row = dict(n=n, label=label, code=code, spec=spec, runs=len(runs))
@@ -235,6 +235,8 @@ def main() -> None:
     ap.add_argument("--python", default=sys.executable)
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--timeout", type=float, default=1800.0, help="per child, s")
+    ap.add_argument("--single-above", type=float, default=30.0,
+                    help="a solve slower than this (s) is not repeated")
     ap.add_argument("--out", type=Path,
                     default=ROOT / "benchmarks/results/peers_contact.md")
     a = ap.parse_args()
@@ -306,30 +308,32 @@ def write(a, rows, started, load_before, load_after, note="") -> None:
         f"- command: `{' '.join([Path(sys.executable).name] + sys.argv)}`",
         f"- machine: {machine()}; **shared with other jobs** (load average before "
         f"{load_before}, after {load_after}): absolute times are noisy, ratios less so",
-        f"- threads per solve: {a.threads}; medians of {a.repeats} child processes; "
+        f"- threads per solve: {a.threads}; medians of {a.repeats} child processes (one "
+        f"when the first took over {a.single_above:g} s: column 'runs'); "
         f"tolerance {a.tol:g} in each code's own measure; h_s = "
         f"{'max h − min h' if a.hs == 'range' else 'rms height'}",
         f"- versions: {versions(a.python)}",
     ] + ([f"- **{note}**"] if note else []) + [
         "",
-        "| size | case | code | median s | peak MiB | iterations | own tol. measure | "
-        "KKT/h_s | contact fraction | p̄ | approach/h_s | Δa | cells differing | ‖Δp‖ "
+        "| size | case | code | runs | median s | peak MiB | iterations | own tol. measure "
+        "| KKT/h_s | contact fraction | p̄ | approach/h_s | Δa | cells differing | ‖Δp‖ "
         "| time ratio to leakpath |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         n = r["n"]
         name = r.get("label", "leakpath") if "approach" not in r.get("spec", {}) else \
             "leakpath (displacement control)"
         if "seconds" not in r:
-            lines.append(f"| {n}² | {r.get('case', '')} | {name} | failed: "
+            lines.append(f"| {n}² | {r.get('case', '')} | {name} | {r['runs']} | failed: "
                          f"{r.get('error', '?')[:120]} |" + " — |" * 11)
             continue
         d = np.load(a.cache / f"rmd_{n}_{a.hs}.npz")
         scale = float(d["scale"])
         conv = "" if r.get("converged", True) else f" ({r.get('status', 'not converged')})"
         lines.append(
-            f"| {n}² | {r['case']} | {name}{conv} | {r['seconds']:.3f} | {r['peak_mib']:.0f} "
+            f"| {n}² | {r['case']} | {name}{conv} | {r['ok']} | {r['seconds']:.3f} "
+            f"| {r['peak_mib']:.0f} "
             f"| {r['iterations']} | {r['own']:.1e} | {r['kkt']:.1e} | {r['a']:.6f} | "
             f"{r['mean_pressure']:.6e} | {r['approach'] / scale:.6f} | "
             + (f"{r['da']:+.1e} | {r['dcells']} | {r['dp']:.1e} | {r['ratio']:.2f} |"
