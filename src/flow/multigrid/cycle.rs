@@ -1,0 +1,147 @@
+//! The V-cycle: ℓ1 hybrid Gauss–Seidel smoothing, the finest level from the grid stencil.
+
+use rayon::prelude::*;
+
+use super::{Buffers, DenseCholesky, Graph, Interp, Stencil, CHUNK, NONE};
+
+#[derive(Clone, Copy)]
+pub(super) struct SharedMut(pub(super) *mut f64);
+// SAFETY: see `Multigrid::apply`: concurrent tasks write disjoint elements.
+unsafe impl Send for SharedMut {}
+unsafe impl Sync for SharedMut {}
+
+/// The finest level applied from the grid stencil: unknown `i` is cell `cells[i]`, its
+/// faces those of the stencil (to cells with unknowns only).
+pub(super) struct Fine<'a> {
+    pub(super) st: &'a Stencil,
+    pub(super) cells: &'a [u32],
+    pub(super) index: &'a [u32],
+}
+
+impl Fine<'_> {
+    /// `Σ_j w_ij x_j` of unknown `i` (cell `k`), `x_j` from `inside` for unknowns of the
+    /// block `i0..i0 + inside.len()` and from `outside` otherwise, and `Σ |w_ij|` over the
+    /// faces outside the block.
+    #[inline(always)]
+    fn row(&self, k: usize, i0: usize, inside: &[f64], outside: &[f64]) -> (f64, f64) {
+        let i1 = i0 + inside.len();
+        let (mut v, mut out) = (0.0, 0.0);
+        self.st.for_each_face(k, |l, c| {
+            let j = self.index[l];
+            if j == NONE {
+                return;
+            }
+            let j = j as usize;
+            let xj = if j >= i0 && j < i1 {
+                inside[j - i0]
+            } else {
+                out += c;
+                outside[j]
+            };
+            v += c * xj;
+        });
+        (v, out)
+    }
+
+    /// [`Graph::residual`] on the finest level.
+    fn residual(&self, x: &[f64], b: &[f64], r: &mut [f64]) {
+        r.par_chunks_mut(CHUNK).enumerate().for_each(|(blk, rc)| {
+            let i0 = blk * CHUNK;
+            for (t, rv) in rc.iter_mut().enumerate() {
+                let i = i0 + t;
+                let k = self.cells[i] as usize;
+                let (v, _) = self.row(k, 0, &[], x);
+                *rv = b[i] - self.st.d[k] * x[i] + v;
+            }
+        });
+    }
+
+    /// [`Graph::smooth`] on the finest level.
+    fn smooth(&self, b: &[f64], x: &mut [f64], old: &mut [f64], reverse: bool) {
+        old.copy_from_slice(x);
+        let old = &*old;
+        x.par_chunks_mut(CHUNK).enumerate().for_each(|(blk, xc)| {
+            let i0 = blk * CHUNK;
+            let m = xc.len();
+            let update = |t: usize, xc: &mut [f64]| {
+                let i = i0 + t;
+                let k = self.cells[i] as usize;
+                let (v, out) = self.row(k, i0, xc, old);
+                let d = self.st.d[k];
+                xc[t] += (b[i] - d * xc[t] + v) / (d + out);
+            };
+            if reverse {
+                for t in (0..m).rev() {
+                    update(t, xc);
+                }
+            } else {
+                for t in 0..m {
+                    update(t, xc);
+                }
+            }
+        });
+    }
+}
+
+/// One V-cycle on `levels[0]` for `bufs[0].b` into `bufs[0].x`; `fine`: `levels[0]` is the
+/// finest level, applied from the stencil.
+pub(super) fn vcycle(
+    levels: &[Graph],
+    interps: &[Interp],
+    bufs: &mut [Buffers],
+    coarse: &DenseCholesky,
+    fine: Option<&Fine<'_>>,
+) {
+    let (here, rest) = bufs.split_first_mut().expect("a level");
+    if levels.len() == 1 {
+        coarse.solve(&here.b, &mut here.x);
+        return;
+    }
+    let g = &levels[0];
+    let ip = &interps[0];
+    let Buffers { x, b, r, old } = here;
+    x.par_iter_mut().for_each(|v| *v = 0.0);
+    match fine {
+        Some(f) => {
+            f.smooth(b, x, old, false);
+            f.residual(x, b, r);
+        }
+        None => {
+            g.smooth(b, x, old, false);
+            g.residual(x, b, r);
+        }
+    }
+    {
+        let below = &mut rest[0];
+        below
+            .b
+            .par_chunks_mut(CHUNK)
+            .enumerate()
+            .for_each(|(blk, bc)| {
+                for (t, bv) in bc.iter_mut().enumerate() {
+                    let c = blk * CHUNK + t;
+                    let mut s = 0.0;
+                    for q in ip.tptr[c]..ip.tptr[c + 1] {
+                        s += ip.tval[q] * r[ip.trow[q] as usize];
+                    }
+                    *bv = s;
+                }
+            });
+    }
+    vcycle(&levels[1..], &interps[1..], rest, coarse, None);
+    let xc = &rest[0].x;
+    x.par_chunks_mut(CHUNK).enumerate().for_each(|(blk, xs)| {
+        for (t, v) in xs.iter_mut().enumerate() {
+            let i = blk * CHUNK + t;
+            let mut s = 0.0;
+            for p in ip.ptr[i]..ip.ptr[i + 1] {
+                s += ip.val[p] * xc[ip.col[p] as usize];
+            }
+            *v += s;
+        }
+    });
+    match fine {
+        Some(f) => f.smooth(b, x, old, true),
+        None => g.smooth(b, x, old, true),
+    }
+}

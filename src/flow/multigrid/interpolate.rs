@@ -1,0 +1,122 @@
+//! Classical interpolation with lumping, from the strong C neighbours of each F unknown.
+
+use rayon::prelude::*;
+
+use super::{concat, strong, Graph, Interp, CHUNK, NONE};
+
+/// Classical interpolation (module docs) and the row-sum deficits `δ_i = dir_i / den`.
+pub(super) fn interpolation(
+    g: &Graph,
+    wmax: &[f64],
+    cidx: &[u32],
+    nc: usize,
+) -> (Interp, Vec<f64>) {
+    let n = g.n;
+    type Block = (Vec<usize>, Vec<u32>, Vec<f64>, Vec<f64>);
+    let blocks: Vec<Block> = (0..n.div_ceil(CHUNK))
+        .into_par_iter()
+        .map(|blk| {
+            let rows = blk * CHUNK..((blk + 1) * CHUNK).min(n);
+            let mut len = Vec::with_capacity(rows.len());
+            let mut col = Vec::new();
+            let mut val = Vec::new();
+            let mut delta = Vec::with_capacity(rows.len());
+            let mut row: Vec<(u32, f64)> = Vec::new();
+            for i in rows {
+                if cidx[i] != NONE {
+                    len.push(1);
+                    col.push(cidx[i]);
+                    val.push(1.0);
+                    delta.push(0.0);
+                    continue;
+                }
+                row.clear();
+                let mut den = g.dir[i];
+                // Strong C neighbours first (their fine index and w_ij).
+                for p in g.ptr[i]..g.ptr[i + 1] {
+                    let j = g.col[p] as usize;
+                    if strong(g.w[p], wmax[i]) && cidx[j] != NONE {
+                        row.push((j as u32, g.w[p]));
+                        den += g.w[p];
+                    }
+                }
+                if row.is_empty() {
+                    len.push(0);
+                    delta.push(1.0);
+                    continue;
+                }
+                // Strong F neighbours: distributed over the strong C neighbours of i.
+                for p in g.ptr[i]..g.ptr[i + 1] {
+                    let k = g.col[p] as usize;
+                    let wik = g.w[p];
+                    if !strong(wik, wmax[i]) || cidx[k] != NONE {
+                        continue;
+                    }
+                    let mut sum = 0.0;
+                    for e in row.iter() {
+                        let wkm = g.weight(k, e.0);
+                        if wkm > 0.0 {
+                            sum += wkm;
+                        }
+                    }
+                    if sum > 0.0 {
+                        den += wik;
+                        let share = wik / sum;
+                        for e in row.iter_mut() {
+                            let wkm = g.weight(k, e.0);
+                            if wkm > 0.0 {
+                                e.1 += share * wkm;
+                            }
+                        }
+                    }
+                }
+                len.push(row.len());
+                for &(j, v) in row.iter() {
+                    col.push(cidx[j as usize]);
+                    val.push(v / den);
+                }
+                delta.push(g.dir[i] / den);
+            }
+            (len, col, val, delta)
+        })
+        .collect();
+    let mut deltas = Vec::with_capacity(n);
+    let blocks: Vec<(Vec<usize>, Vec<u32>, Vec<f64>)> = blocks
+        .into_iter()
+        .map(|(l, c, v, d)| {
+            deltas.extend_from_slice(&d);
+            (l, c, v)
+        })
+        .collect();
+    let (ptr, col, val) = concat(blocks);
+    // Transpose by counting (rows of each coarse column ascending).
+    let mut tptr = vec![0usize; nc + 1];
+    for &c in &col {
+        tptr[c as usize + 1] += 1;
+    }
+    for c in 0..nc {
+        tptr[c + 1] += tptr[c];
+    }
+    let mut fill = tptr[..nc].to_vec();
+    let mut trow = vec![0u32; col.len()];
+    let mut tval = vec![0.0; col.len()];
+    for i in 0..n {
+        for p in ptr[i]..ptr[i + 1] {
+            let c = col[p] as usize;
+            trow[fill[c]] = i as u32;
+            tval[fill[c]] = val[p];
+            fill[c] += 1;
+        }
+    }
+    (
+        Interp {
+            ptr,
+            col,
+            val,
+            tptr,
+            trow,
+            tval,
+        },
+        deltas,
+    )
+}
