@@ -5,16 +5,19 @@ use std::time::Instant;
 
 use rayon::prelude::*;
 
-use super::passes::{Acc, Mode, Work};
+use super::passes::{positive, Acc, Mode, Work};
 use super::*;
 use crate::alloc;
 use crate::contact::problem::Solver;
 use crate::elastic::kernel::love_displacement;
 
-/// `x > 0` and not NaN.
-#[inline]
-fn positive(x: f64) -> bool {
-    x > 0.0
+/// Step 7 of load control folded into the gap pass: `p` and `u` scaled together by
+/// `k = target / Σ p`, the approach `Δ = (Σ_{I_c} (max h − h) + k Σ_{I_c} u) / |I_c|` from the
+/// sums `now` of the unscaled state. Returns `Δ` and the new state's reductions.
+fn scale_to_load(w: &mut Work<'_>, target: f64, now: Acc) -> (f64, Acc) {
+    let k = target / now.sum_p;
+    let delta = (now.sh + k * now.su) / now.n_c.max(1) as f64;
+    (delta, w.gap_pass(delta, Some(k)))
 }
 
 /// Deterministic `(max, min, Σ)` of the heights.
@@ -302,11 +305,11 @@ pub(super) fn run(
                         Mode::Displacement(_) => w.chord_update(s),
                         Mode::Load(target) => {
                             // Σ d = 0: the new p keeps the load up to round-off, which the
-                            // rescale of step 7 removes (p and u together).
+                            // rescale of step 7 removes.
                             let now = w.chord_update_load(s);
-                            let k = target / now.sum_p;
-                            delta = (now.sh + k * now.su) / now.n_c.max(1) as f64;
-                            w.gap_pass(delta, Some(k))
+                            let (d, next) = scale_to_load(&mut w, target, now);
+                            delta = d;
+                            next
                         }
                     };
                     it += 1;
@@ -394,11 +397,8 @@ pub(super) fn run(
                 state = now;
             }
             Mode::Load(target) if consistent && now.n_c > 0 => {
-                // Step 7 folded into the gap pass: p and u scale together.
                 fresh = false;
-                let s = target / now.sum_p;
-                delta = (now.sh + s * now.su) / now.n_c as f64;
-                state = w.gap_pass(delta, Some(s));
+                (delta, state) = scale_to_load(&mut w, target, now);
             }
             _ => {
                 if let Mode::Load(target) = mode {

@@ -11,7 +11,7 @@ use crate::elastic::operator::Operator;
 
 /// `x > 0` and not NaN.
 #[inline]
-fn positive(x: f64) -> bool {
+pub(super) fn positive(x: f64) -> bool {
     x > 0.0
 }
 
