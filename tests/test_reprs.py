@@ -62,7 +62,8 @@ def test_contact_problem(problem: ContactProblem) -> None:
 def test_contact_state(state: leakpath.ContactState) -> None:
     text = check_short(state, "ContactState")
     assert "33x33" in text
-    assert f"approach={state.approach:.6g}" in text
+    assert f"approach={state.approach:.6g} µm" in text  # the surface's unit
+    assert f"mean_gap={state.mean_gap:.4g} µm" in text and "(unit of E)" in text
     assert f"contact_fraction={state.contact_fraction:.4g}" in text
     assert f"solver={state.solver!r}" in text
 
@@ -85,7 +86,21 @@ def test_contact_state_with_malformed_fields(
 def test_percolation(state: leakpath.ContactState) -> None:
     perc = state.percolation()
     text = check_short(perc, "Percolation")
-    assert f"clusters={perc.n_clusters}" in text and f"V_pg={perc.spanning_volume:.4g}" in text
+    assert f"clusters={perc.n_clusters}" in text
+    assert f"V_pg={perc.spanning_volume:.4g} µm^3" in text
+
+
+def test_reprs_name_the_surface_unit() -> None:
+    """The unit printed is the surface's own, not a default; a bare gap array has none."""
+    s = rmd(4, 2.2, seed=2, length=5e-4, sigma0=3e-6, unit="m")
+    st = ContactProblem(s).solve(0.4 * s.height_range)
+    assert f"approach={st.approach:.6g} m," in repr(st)
+    perc = st.percolation()
+    assert f"V={perc.free_volume:.4g} m^3)" in repr(perc)
+    bare = leakpath.percolation(st.gap, dx=s.dx, contact=st.contact)
+    assert f"V={bare.free_volume:.4g} length^3)" in repr(bare)
+    t = percolation_threshold(s)
+    assert f"approach={t.approach:.6g} m," in repr(t)
 
 
 def test_flow(state: leakpath.ContactState) -> None:
@@ -105,7 +120,7 @@ def test_percolation_threshold(surface: leakpath.Surface) -> None:
     assert t.found
     text = check_short(t, "PercolationThreshold")
     assert "ContactState" not in text  # the bracketing states are not embedded
-    assert f"approach={t.approach:.6g}" in text and f"solves={t.solves}" in text
+    assert f"approach={t.approach:.6g} µm" in text and f"solves={t.solves}" in text
 
 
 def test_percolation_threshold_not_found(state: leakpath.ContactState) -> None:

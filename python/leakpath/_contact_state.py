@@ -56,23 +56,28 @@ class ContactState:
     #: solve plus the deformation of the surface it was solved on (an unloading problem);
     #: ``None``: none (zeros).
     plastic_displacement_field: np.ndarray | None = field(default=None, repr=False)
+    #: Name of the length unit (:attr:`leakpath.Surface.unit`) the state's lengths are in;
+    #: ``None`` for a state built by hand (then printed as "length").
+    unit: str | None = field(default=None, repr=False)
 
     def __repr__(self) -> str:
         # One line of scalars: the fields are grids, shown by their shape only.
         try:
             ny, nx = self.shape
+            u = self.unit or "length"
             return (
-                f"ContactState({ny}x{nx} grid, approach={self.approach:.6g}, "
+                f"ContactState({ny}x{nx} grid, approach={self.approach:.6g} {u}, "
                 f"contact_fraction={self.contact_fraction:.4g}, "
-                f"mean_pressure={self.mean_pressure:.4g}, mean_gap={self.mean_gap:.4g}, "
+                f"mean_pressure={self.mean_pressure:.4g} (unit of E), "
+                f"mean_gap={self.mean_gap:.4g} {u}, "
                 f"solver={self.solver!r}, iterations={self.iterations}, kkt={self.kkt:.1e}, "
                 + (
                     ""
                     if self.hardness is None
-                    else f"hardness={self.hardness:.4g}, "
+                    else f"hardness={self.hardness:.4g} (unit of E), "
                     f"plastic_fraction={self.plastic_fraction:.4g}, "
                 )
-                + f"seconds={self.seconds:.3g})"
+                + f"seconds={self.seconds:.3g} s)"
             )
         except Exception:  # malformed fields (a hand-built state refused as a warm start)
             return (

@@ -90,6 +90,8 @@ class Percolation:
         connectivity: 4 or 8.
         periodic: whether the grid wrapped across the axis other than the flow axis.
         dx: grid spacing (length).
+        unit: name of the length unit (a contact state's :attr:`leakpath.Surface.unit`;
+            ``None`` for a gap array, printed as "length").
     """
 
     labels: np.ndarray = field(repr=False)
@@ -116,6 +118,7 @@ class Percolation:
     connectivity: int
     periodic: bool
     dx: float
+    unit: str | None = field(default=None, repr=False)
 
     @property
     def percolates(self) -> bool:
@@ -124,13 +127,14 @@ class Percolation:
 
     def __repr__(self) -> str:
         ny, nx = self.shape
+        v = f" {self.unit or 'length'}^3"
         return (
             f"Percolation({ny}x{nx} grid, axis={self.axis!r}, "
             f"connectivity={self.connectivity}, percolates={self.percolates}, "
             f"clusters={self.n_clusters} (spanning {self.n_spanning}, dead-end "
-            f"{self.n_dead_end}, trapped {self.n_trapped}), V_pg={self.spanning_volume:.4g}, "
-            f"V_dead={self.dead_end_volume:.4g}, V_trapped={self.trapped_volume:.4g}, "
-            f"V={self.free_volume:.4g})"
+            f"{self.n_dead_end}, trapped {self.n_trapped}), "
+            f"V_pg={self.spanning_volume:.4g}{v}, V_dead={self.dead_end_volume:.4g}{v}, "
+            f"V_trapped={self.trapped_volume:.4g}{v}, V={self.free_volume:.4g}{v})"
         )
 
     @property
@@ -277,7 +281,9 @@ def percolation(
         lab = state_labelling(
             state, connectivity=conn, wrap=_wrap_for(axis_used, wrap_on), threads=threads
         )
-        return _classified(lab, axis_used, conn, wrap_on, dx_f, threads)
+        return _classified(
+            lab, axis_used, conn, wrap_on, dx_f, threads, getattr(state, "unit", None)
+        )
 
     gap_in = state_or_gap
     if dx is None:
@@ -335,20 +341,34 @@ def percolations(
     for wrap, group in groups.items():
         lab = state_labelling(state, connectivity=conn, wrap=wrap, threads=threads)
         for a, res in zip(group, _core.classify(lab, group, threads=threads), strict=True):
-            found[a] = _percolation_of(lab, res, a, conn, any(wrap), dx_f)
+            found[a] = _percolation_of(
+                lab, res, a, conn, any(wrap), dx_f, getattr(state, "unit", None)
+            )
     return [found[a] for a in canon]
 
 
 def _classified(
-    lab: Any, axis: int | str, conn: int, wrap: bool, dx: float, threads: int | None
+    lab: Any,
+    axis: int | str,
+    conn: int,
+    wrap: bool,
+    dx: float,
+    threads: int | None,
+    unit: str | None = None,
 ) -> Percolation:
     """:class:`Percolation` of a labelling for ``axis`` (per-cluster work only)."""
     (res,) = _core.classify(lab, [axis], threads=threads)
-    return _percolation_of(lab, res, axis, conn, wrap, dx)
+    return _percolation_of(lab, res, axis, conn, wrap, dx, unit)
 
 
 def _percolation_of(
-    lab: Any, res: Any, axis: int | str, conn: int, wrap: bool, dx: float
+    lab: Any,
+    res: Any,
+    axis: int | str,
+    conn: int,
+    wrap: bool,
+    dx: float,
+    unit: str | None = None,
 ) -> Percolation:
     """:class:`Percolation` from a labelling and its classification for ``axis``."""
     cell = dx * dx
@@ -377,6 +397,7 @@ def _percolation_of(
         connectivity=conn,
         periodic=wrap,
         dx=dx,
+        unit=unit,
     )
 
 

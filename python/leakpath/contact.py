@@ -492,6 +492,7 @@ class ContactProblem:
             fft_products=out.fft_products,
             preconditioner_products=out.preconditioner_products,
             coarse_fft_products=out.coarse.fft_products_fine_equivalent,
+            unit=self.surface.unit,
         )
 
 

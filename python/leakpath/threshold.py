@@ -52,13 +52,14 @@ class PercolationThreshold:
 
     def __repr__(self) -> str:
         # The two bracketing states are grids: name their approaches only.
+        u = getattr(self.below, "unit", None) or "length"
         above = "None" if self.above is None else f"{self.above.approach:.6g}"
         return (
-            f"PercolationThreshold(approach={self.approach:.6g}, "
+            f"PercolationThreshold(approach={self.approach:.6g} {u}, "
             f"contact_fraction={self.contact_fraction:.4g}, "
             f"approach/h_s={self.approach_dimensionless:.4g}, axis={self.axis!r}, "
             f"found={self.found}, solves={self.solves}, "
-            f"bracket=[{self.below.approach:.6g}, {above}])"
+            f"bracket=[{self.below.approach:.6g}, {above}] {u})"
         )
 
 
