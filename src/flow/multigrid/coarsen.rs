@@ -2,18 +2,15 @@
 
 use rayon::prelude::*;
 
-use super::{Graph, CHUNK, NONE, THETA};
+use super::rows::Rows;
+use super::{CHUNK, NONE, THETA};
 
 /// Largest positive face of every row.
-pub(super) fn strongest(g: &Graph) -> Vec<f64> {
-    (0..g.n)
+pub(super) fn strongest(g: &impl Rows) -> Vec<f64> {
+    (0..g.n())
         .into_par_iter()
         .with_min_len(CHUNK)
-        .map(|i| {
-            g.w[g.ptr[i]..g.ptr[i + 1]]
-                .iter()
-                .fold(0.0, |m: f64, &w| m.max(w))
-        })
+        .map(|i| g.row(i).fold(0.0, |m: f64, (_, w)| m.max(w)))
         .collect()
 }
 
@@ -25,8 +22,8 @@ pub(super) fn strong(w: f64, wmax: f64) -> bool {
 
 /// Ruge–Stüben first pass: the coarse index of every C unknown (`NONE` for F) and their
 /// number.
-pub(super) fn split(g: &Graph, wmax: &[f64]) -> (Vec<u32>, usize) {
-    let n = g.n;
+pub(super) fn split(g: &impl Rows, wmax: &[f64]) -> (Vec<u32>, usize) {
+    let n = g.n();
     const UNDECIDED: u8 = 0;
     const C: u8 = 1;
     const F: u8 = 2;
@@ -35,15 +32,10 @@ pub(super) fn split(g: &Graph, wmax: &[f64]) -> (Vec<u32>, usize) {
         .into_par_iter()
         .with_min_len(CHUNK)
         .map(|i| {
-            let mut c = 0;
-            for p in g.ptr[i]..g.ptr[i + 1] {
-                let j = g.col[p] as usize;
-                // w_ji = w_ij (symmetric).
-                if strong(g.w[p], wmax[j]) {
-                    c += 1;
-                }
-            }
-            c
+            // w_ji = w_ij (symmetric).
+            g.row(i)
+                .filter(|&(j, w)| strong(w, wmax[j as usize]))
+                .count() as u32
         })
         .collect();
     let mut state = vec![UNDECIDED; n];
@@ -88,16 +80,16 @@ pub(super) fn split(g: &Graph, wmax: &[f64]) -> (Vec<u32>, usize) {
         unlink(i, top, &mut head, &mut next, &mut prev);
         state[i] = C;
         // Strong dependents of i become F; their strong influencers gain weight.
-        for p in g.ptr[i]..g.ptr[i + 1] {
-            let j = g.col[p] as usize;
-            if state[j] != UNDECIDED || !strong(g.w[p], wmax[j]) {
+        for (j, wij) in g.row(i) {
+            let j = j as usize;
+            if state[j] != UNDECIDED || !strong(wij, wmax[j]) {
                 continue;
             }
             unlink(j, lambda[j] as usize, &mut head, &mut next, &mut prev);
             state[j] = F;
-            for q in g.ptr[j]..g.ptr[j + 1] {
-                let k = g.col[q] as usize;
-                if state[k] != UNDECIDED || !strong(g.w[q], wmax[j]) {
+            for (k, wjk) in g.row(j) {
+                let k = k as usize;
+                if state[k] != UNDECIDED || !strong(wjk, wmax[j]) {
                     continue;
                 }
                 let l = lambda[k] as usize;
@@ -117,9 +109,9 @@ pub(super) fn split(g: &Graph, wmax: &[f64]) -> (Vec<u32>, usize) {
             }
         }
         // Unknowns that strongly influence i lose weight.
-        for p in g.ptr[i]..g.ptr[i + 1] {
-            let k = g.col[p] as usize;
-            if state[k] != UNDECIDED || !strong(g.w[p], wmax[i]) {
+        for (k, wik) in g.row(i) {
+            let k = k as usize;
+            if state[k] != UNDECIDED || !strong(wik, wmax[i]) {
                 continue;
             }
             let l = lambda[k] as usize;
@@ -145,15 +137,14 @@ pub(super) fn split(g: &Graph, wmax: &[f64]) -> (Vec<u32>, usize) {
             continue;
         }
         ci.clear();
-        for p in g.ptr[i]..g.ptr[i + 1] {
-            let j = g.col[p] as usize;
-            if state[j] == C && strong(g.w[p], wmax[i]) {
-                ci.push(j as u32);
+        for (j, wij) in g.row(i) {
+            if state[j as usize] == C && strong(wij, wmax[i]) {
+                ci.push(j);
             }
         }
-        for p in g.ptr[i]..g.ptr[i + 1] {
-            let k = g.col[p] as usize;
-            if state[k] != F || !strong(g.w[p], wmax[i]) {
+        for (k, wik) in g.row(i) {
+            let k = k as usize;
+            if state[k] != F || !strong(wik, wmax[i]) {
                 continue;
             }
             if !ci.iter().any(|&m| g.weight(k, m) > 0.0) {

@@ -17,7 +17,7 @@ impl DenseCholesky {
             l[i * n + i] = g.d[i];
             for p in g.ptr[i]..g.ptr[i + 1] {
                 let j = g.col[p] as usize;
-                l[i * n + j] -= g.w[p];
+                l[i * n + j] -= f64::from(g.w[p]);
             }
         }
         for k in 0..n {
