@@ -80,6 +80,8 @@ use rayon::prelude::*;
 use super::assemble::Stencil;
 use super::cg::CHUNK;
 use coarsen::{split, strong, strongest};
+#[cfg(test)]
+use coarsen::{split_in_blocks, SPLIT_BLOCK};
 use coarsest::DenseCholesky;
 use cycle::{vcycle, Fine, SharedMut};
 use galerkin::galerkin;

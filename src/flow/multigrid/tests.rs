@@ -28,7 +28,7 @@ fn rough(seed: u64, ny: usize, nx: usize) -> Stencil {
 
 #[test]
 fn every_strong_f_pair_shares_a_c_neighbour() {
-    for seed in 0..3 {
+    for seed in 0..4 {
         let st = rough(seed, 60, 50);
         let (cells, index) = unknowns(&st);
         let g = Fine {
@@ -37,7 +37,10 @@ fn every_strong_f_pair_shares_a_c_neighbour() {
             index: &index,
         };
         let wmax = strongest(&g);
-        let (cidx, nc) = split(&g, &wmax);
+        // One block (3000 unknowns at most), and blocks of 97 unknowns: the pairs across
+        // block boundaries too.
+        let block = if seed >= 2 { 97 } else { SPLIT_BLOCK };
+        let (cidx, nc) = split_in_blocks(&g, &wmax, block);
         assert!(nc > 0 && nc < g.n());
         for i in (0..g.n()).filter(|&i| cidx[i] == NONE) {
             let ci: Vec<u32> = g
@@ -156,4 +159,24 @@ fn multigrid_memory_estimate_is_honest() {
             mg.complexity()
         );
     }
+}
+
+#[test]
+fn split_in_blocks_is_the_same_on_one_and_two_threads() {
+    let st = rough(5, 80, 70);
+    let (cells, index) = unknowns(&st);
+    let g = Fine {
+        st: &st,
+        cells: &cells,
+        index: &index,
+    };
+    let wmax = strongest(&g);
+    let run = |threads: usize| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .expect("a pool")
+            .install(|| split_in_blocks(&g, &wmax, 211))
+    };
+    assert_eq!(run(1), run(2));
 }
