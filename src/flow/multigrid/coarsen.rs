@@ -26,9 +26,11 @@ const F: u8 = 2;
 
 /// Unknowns per block of the splitting: each block is split on its own (in parallel), so
 /// the C/F split depends on the block boundaries only, never on the thread count. Unknowns
-/// are numbered in grid order: a block is a band of whole grid rows (about 100 at 4097²),
-/// so few strong faces cross a boundary.
-pub(super) const SPLIT_BLOCK: usize = 1 << 18;
+/// are numbered in grid order, so a block is a band of whole grid rows (blocks of 2^18:
+/// about 100 rows at 4097²). One block (the sequential splitting) by default: on the 4097²
+/// gap blocks of 2^18 took 58 CG iterations instead of 42 for some 10 s less setup
+/// (docs/flow.md).
+pub(super) const SPLIT_BLOCK: usize = usize::MAX;
 
 /// Ruge–Stüben splitting: the coarse index of every C unknown (`NONE` for F) and their
 /// number. Both passes run on fixed blocks of [`SPLIT_BLOCK`] unknowns in parallel, the

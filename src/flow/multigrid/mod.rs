@@ -23,10 +23,12 @@
 //!   deterministic): repeatedly the undecided unknown on which most undecided ones depend
 //!   strongly becomes C and its strong dependents F; then a second pass in unknown order:
 //!   a strong F neighbour `k` of an F unknown `i` joined to none of the strong C neighbours
-//!   of `i` becomes C. Without it the interpolation lumps such `w_ik` and the cycle
-//!   contracts the error by only about 0.5–0.6 per CG step on near-threshold gaps; with it
-//!   about 0.15–0.4 (the iterations to the default tolerance drop from 73–78 to 42–43 at
-//!   1025² and 2049², docs/flow.md), for some 10 % more operator complexity;
+//!   of `i` becomes C. Without the second pass the interpolation lumps such `w_ik` and the
+//!   cycle contracts the error by only about 0.5–0.6 per CG step on near-threshold gaps;
+//!   with it about 0.15–0.4 (the iterations to the default tolerance drop from 73–78 to
+//!   42–43 at 1025² and 2049², docs/flow.md), for some 10 % more operator complexity.
+//!   The code can also split fixed blocks of unknowns in parallel, the same for any thread
+//!   count, but the seams cost iterations (`SPLIT_BLOCK`, one block by default);
 //! - interpolation to an F unknown `i`, classical with lumping: weak faces go to the
 //!   diagonal, a strong F neighbour `k` is distributed over the strong C neighbours of `i`
 //!   in proportion to `w_km` (lumped to the diagonal when it has none):
@@ -60,9 +62,19 @@
 //! dense Cholesky factor. Block boundaries and every sum's order are fixed, so the bits do
 //! not depend on the thread count.
 //!
-//! The finest level is built in compressed rows like the others (the setup reads rows by
-//! index), then freed: the cycle applies it from the grid stencil through the map from
-//! cells to unknowns (4 bytes per cell instead of some 56 per unknown).
+//! # Storage
+//!
+//! The finest level is never copied into compressed rows: the setup reads its rows from
+//! the grid stencil through the map from cells to unknowns ([`rows`]), and the cycle
+//! applies it from the stencil too (4 bytes per cell instead of some 56 per unknown).
+//! Coarse faces and interpolation weights are stored in single precision; each coarse
+//! diagonal is summed from the rounded faces, so a level is exactly the conductance form of
+//! its rounded faces (each face changed by at most 2^-24 of itself: where the faces are
+//! positive the level's energy `Σ w_ij (x_i − x_j)² + Σ dir_i x_i²` changes by at most that
+//! fraction, however ill-conditioned the level) and the next level is built from what is stored. Vectors, the cycle's
+//! arithmetic and CG stay in double precision: the preconditioner changes a little, the
+//! answer is that of the exact fine operator. Each level's reservoir part is freed once
+//! the level below it is built.
 
 mod coarsen;
 mod coarsest;
