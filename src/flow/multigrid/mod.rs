@@ -165,11 +165,11 @@ pub struct Multigrid {
 }
 
 /// Bytes of the hierarchy for `unknowns` fine unknowns, its setup's transient vectors
-/// included. Built, [`Multigrid::bytes`] is about 110–150 bytes per unknown on contact gaps
-/// and random fields (single-precision faces and weights, the finest level never in
-/// compressed rows; `multigrid_memory_estimate_is_honest` in the tests); the setup adds some
-/// 50 per unknown of the level it coarsens. Measured at 4097² (docs/flow.md): about 150
-/// bytes per unknown between the start and the end of the setup.
+/// included. Built, [`Multigrid::bytes`] is 165–166 bytes per unknown on random fields with
+/// a third of the cells closed (operator complexity 2.2; `multigrid_memory_estimate_is_honest`
+/// in the tests): single-precision faces and weights, the finest level never in compressed
+/// rows. Measured on contact gaps (docs/flow.md): the resident set grows by about 150
+/// bytes per unknown from the start to the end of the setup at 4097² and 8193².
 pub fn memory_estimate(unknowns: usize) -> u64 {
     unknowns as u64 * 220
 }

@@ -151,6 +151,11 @@ fn multigrid_memory_estimate_is_honest() {
         let m = st.active.iter().filter(|&&a| a).count();
         let mg = Multigrid::new(st);
         let (bytes, est) = (mg.bytes(), memory_estimate(m));
+        println!(
+            "{ny} × {nx}: {m} unknowns, {:.0} bytes per unknown, complexity {:.2}",
+            bytes as f64 / m as f64,
+            mg.complexity()
+        );
         assert!(mg.n_levels() >= 4);
         assert!(
             bytes <= est && 2 * bytes >= est,
