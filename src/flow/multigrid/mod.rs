@@ -258,52 +258,6 @@ fn unknowns(st: &Stencil) -> (Vec<u32>, Vec<u32>) {
     (cells, index)
 }
 
-/// A level's operator copied into compressed rows.
-fn graph_of(g: &impl Rows) -> Graph {
-    let n = g.n();
-    type Block = (Vec<usize>, Vec<u32>, Vec<f32>);
-    let blocks: Vec<Block> = (0..n.div_ceil(CHUNK))
-        .into_par_iter()
-        .map(|blk| {
-            let rows = blk * CHUNK..((blk + 1) * CHUNK).min(n);
-            let mut len = Vec::with_capacity(rows.len());
-            let mut col = Vec::new();
-            let mut w = Vec::new();
-            for i in rows {
-                let l0 = col.len();
-                for (j, v) in g.row(i) {
-                    col.push(j);
-                    w.push(v as f32);
-                }
-                len.push(col.len() - l0);
-            }
-            (len, col, w)
-        })
-        .collect();
-    let (ptr, col, w) = concat(blocks);
-    let dir: Vec<f64> = (0..n).into_par_iter().map(|i| g.reservoir(i)).collect();
-    // From the rounded faces, as on the coarse levels.
-    let d = (0..n)
-        .into_par_iter()
-        .map(|i| {
-            dir[i]
-                + w[ptr[i]..ptr[i + 1]]
-                    .iter()
-                    .map(|&v| f64::from(v))
-                    .sum::<f64>()
-        })
-        .map(|s| if s > 0.0 { s } else { 1.0 })
-        .collect();
-    Graph {
-        n,
-        ptr,
-        col,
-        w,
-        dir,
-        d,
-    }
-}
-
 /// One coarsening step below `g`: the interpolation and the coarse operator; `None` when
 /// the splitting keeps no unknown or more than [`MIN_REDUCTION`] of them.
 fn coarsen(g: &impl Rows) -> Option<(Interp, Graph)> {
@@ -365,7 +319,8 @@ impl Multigrid {
             }
         }
         if levels.is_empty() {
-            levels.push(graph_of(&top));
+            // The finest level is the coarsest: factored from the stencil's rows (exact).
+            levels.push(Graph::sized(n0));
         }
         loop {
             let g = levels.last().expect("non-empty");
@@ -388,7 +343,11 @@ impl Multigrid {
                 }
             })
             .collect();
-        let coarse = DenseCholesky::new(levels.last().expect("non-empty"));
+        let coarse = if levels.len() == 1 {
+            DenseCholesky::new(&top)
+        } else {
+            DenseCholesky::new(levels.last().expect("non-empty"))
+        };
         for g in levels.iter_mut() {
             g.dir = Vec::new();
         }
