@@ -1,6 +1,6 @@
 //! Dense Cholesky factor of the coarsest level.
 
-use super::Graph;
+use super::rows::Rows;
 
 /// Dense Cholesky factor of the coarsest level (at most a few hundred unknowns).
 pub(super) struct DenseCholesky {
@@ -10,14 +10,13 @@ pub(super) struct DenseCholesky {
 }
 
 impl DenseCholesky {
-    pub(super) fn new(g: &Graph) -> Self {
-        let n = g.n;
+    pub(super) fn new(g: &impl Rows) -> Self {
+        let n = g.n();
         let mut l = vec![0.0; n * n];
         for i in 0..n {
-            l[i * n + i] = g.d[i];
-            for p in g.ptr[i]..g.ptr[i + 1] {
-                let j = g.col[p] as usize;
-                l[i * n + j] -= g.w[p];
+            l[i * n + i] = g.diag(i);
+            for (j, w) in g.row(i) {
+                l[i * n + j as usize] -= w;
             }
         }
         for k in 0..n {
@@ -30,7 +29,8 @@ impl DenseCholesky {
                     // SPD by construction; a pivot lost to round-off (a coarse unknown joined
                     // to the rest and the reservoirs by faces below ε of its own) solves as
                     // decoupled.
-                    let piv = if v > f64::EPSILON * g.d[k] { v } else { g.d[k] };
+                    let dk = g.diag(k);
+                    let piv = if v > f64::EPSILON * dk { v } else { dk };
                     l[k * n + k] = piv.sqrt();
                 } else {
                     l[k * n + m] = v / l[m * n + m];

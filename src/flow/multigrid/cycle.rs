@@ -99,15 +99,16 @@ pub(super) fn vcycle(
     }
     let g = &levels[0];
     let ip = &interps[0];
-    let Buffers { x, b, r, old } = here;
+    // `r` is the sweeps' scratch too: the residual is dead once restricted.
+    let Buffers { x, b, r } = here;
     x.par_iter_mut().for_each(|v| *v = 0.0);
     match fine {
         Some(f) => {
-            f.smooth(b, x, old, false);
+            f.smooth(b, x, r, false);
             f.residual(x, b, r);
         }
         None => {
-            g.smooth(b, x, old, false);
+            g.smooth(b, x, r, false);
             g.residual(x, b, r);
         }
     }
@@ -122,7 +123,7 @@ pub(super) fn vcycle(
                     let c = blk * CHUNK + t;
                     let mut s = 0.0;
                     for q in ip.tptr[c]..ip.tptr[c + 1] {
-                        s += ip.tval[q] * r[ip.trow[q] as usize];
+                        s += f64::from(ip.tval[q]) * r[ip.trow[q] as usize];
                     }
                     *bv = s;
                 }
@@ -135,13 +136,13 @@ pub(super) fn vcycle(
             let i = blk * CHUNK + t;
             let mut s = 0.0;
             for p in ip.ptr[i]..ip.ptr[i + 1] {
-                s += ip.val[p] * xc[ip.col[p] as usize];
+                s += f64::from(ip.val[p]) * xc[ip.col[p] as usize];
             }
             *v += s;
         }
     });
     match fine {
-        Some(f) => f.smooth(b, x, old, true),
-        None => g.smooth(b, x, old, true),
+        Some(f) => f.smooth(b, x, r, true),
+        None => g.smooth(b, x, r, true),
     }
 }

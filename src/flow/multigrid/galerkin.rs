@@ -2,26 +2,27 @@
 
 use rayon::prelude::*;
 
+use super::rows::Rows;
 use super::{concat, Graph, Interp, CHUNK, NONE};
 
 /// Galerkin coarse operator `Pᵀ A P` in conductance form (module docs).
-pub(super) fn galerkin(g: &Graph, ip: &Interp, delta: &[f64], nc: usize) -> Graph {
+pub(super) fn galerkin(g: &impl Rows, ip: &Interp, delta: &[f64], nc: usize) -> Graph {
     // (A (P 1))_i = dir_i (1 − δ_i) − Σ_k w_ik (δ_i − δ_k): exactly 0 away from reservoirs.
-    let a1: Vec<f64> = (0..g.n)
+    let a1: Vec<f64> = (0..g.n())
         .into_par_iter()
         .with_min_len(CHUNK)
         .map(|i| {
-            let mut v = g.dir[i] * (1.0 - delta[i]);
-            for p in g.ptr[i]..g.ptr[i + 1] {
-                let k = g.col[p] as usize;
+            let mut v = g.reservoir(i) * (1.0 - delta[i]);
+            for (k, wik) in g.row(i) {
+                let k = k as usize;
                 if delta[i] != delta[k] {
-                    v -= g.w[p] * (delta[i] - delta[k]);
+                    v -= wik * (delta[i] - delta[k]);
                 }
             }
             v
         })
         .collect();
-    type Block = (Vec<usize>, Vec<u32>, Vec<f64>, Vec<f64>);
+    type Block = (Vec<usize>, Vec<u32>, Vec<f32>, Vec<f64>);
     // Each task's row accumulator: `slot[c]` is the position of coarse column `c` in the
     // row being built (NONE when absent); the row's entries keep the order of first touch,
     // so every sum is taken in an order fixed by the matrices, not by the threads.
@@ -55,22 +56,23 @@ pub(super) fn galerkin(g: &Graph, ip: &Interp, delta: &[f64], nc: usize) -> Grap
                     };
                     for t in ip.tptr[ci]..ip.tptr[ci + 1] {
                         let i = ip.trow[t] as usize;
-                        let pi = ip.tval[t];
+                        let pi = f64::from(ip.tval[t]);
                         res += pi * a1[i];
                         // (A P)(i, J) = d_i P_iJ − Σ_k w_ik P_kJ, for J ≠ ci.
+                        let di = g.diag(i);
                         for p in ip.ptr[i]..ip.ptr[i + 1] {
                             let cj = ip.col[p];
                             if cj as usize != ci {
-                                add(&mut acc, cj, pi * g.d[i] * ip.val[p]);
+                                add(&mut acc, cj, pi * di * f64::from(ip.val[p]));
                             }
                         }
-                        for q in g.ptr[i]..g.ptr[i + 1] {
-                            let k = g.col[q] as usize;
-                            let f = pi * g.w[q];
+                        for (k, wik) in g.row(i) {
+                            let k = k as usize;
+                            let f = pi * wik;
                             for p in ip.ptr[k]..ip.ptr[k + 1] {
                                 let cj = ip.col[p];
                                 if cj as usize != ci {
-                                    add(&mut acc, cj, -f * ip.val[p]);
+                                    add(&mut acc, cj, -f * f64::from(ip.val[p]));
                                 }
                             }
                         }
@@ -78,12 +80,13 @@ pub(super) fn galerkin(g: &Graph, ip: &Interp, delta: &[f64], nc: usize) -> Grap
                     for e in acc.iter() {
                         slot[e.0 as usize] = NONE;
                     }
-                    acc.retain(|e| e.1 != 0.0);
+                    // Stored in single precision: an entry that rounds to 0 is dropped.
+                    acc.retain(|e| e.1 as f32 != 0.0);
                     acc.sort_unstable_by_key(|e| e.0);
                     len.push(acc.len());
                     for &(c, v) in acc.iter() {
                         col.push(c);
-                        w.push(-v);
+                        w.push(-v as f32);
                     }
                     dir.push(res.max(0.0));
                 }
@@ -92,7 +95,7 @@ pub(super) fn galerkin(g: &Graph, ip: &Interp, delta: &[f64], nc: usize) -> Grap
         )
         .collect();
     let mut dir = Vec::with_capacity(nc);
-    let blocks: Vec<(Vec<usize>, Vec<u32>, Vec<f64>)> = blocks
+    let blocks: Vec<(Vec<usize>, Vec<u32>, Vec<f32>)> = blocks
         .into_iter()
         .map(|(l, c, v, r)| {
             dir.extend_from_slice(&r);
@@ -104,12 +107,15 @@ pub(super) fn galerkin(g: &Graph, ip: &Interp, delta: &[f64], nc: usize) -> Grap
         .into_par_iter()
         .with_min_len(CHUNK)
         .map(|i| {
-            let s = dir[i] + w[ptr[i]..ptr[i + 1]].iter().sum::<f64>();
+            // From the stored (rounded) faces: the level is the conductance form of its
+            // rounded faces exactly.
+            let row = &w[ptr[i]..ptr[i + 1]];
+            let s = dir[i] + row.iter().map(|&v| f64::from(v)).sum::<f64>();
             // A positive definite operator has a positive diagonal; guard round-off.
             if s > 0.0 {
                 s
             } else {
-                w[ptr[i]..ptr[i + 1]].iter().map(|v| v.abs()).sum::<f64>() + dir[i]
+                row.iter().map(|&v| f64::from(v).abs()).sum::<f64>() + dir[i]
             }
         })
         .collect();

@@ -2,17 +2,18 @@
 
 use rayon::prelude::*;
 
-use super::{concat, strong, Graph, Interp, CHUNK, NONE};
+use super::rows::Rows;
+use super::{concat, strong, Interp, CHUNK, NONE};
 
 /// Classical interpolation (module docs) and the row-sum deficits `δ_i = dir_i / den`.
 pub(super) fn interpolation(
-    g: &Graph,
+    g: &impl Rows,
     wmax: &[f64],
     cidx: &[u32],
     nc: usize,
 ) -> (Interp, Vec<f64>) {
-    let n = g.n;
-    type Block = (Vec<usize>, Vec<u32>, Vec<f64>, Vec<f64>);
+    let n = g.n();
+    type Block = (Vec<usize>, Vec<u32>, Vec<f32>, Vec<f64>);
     let blocks: Vec<Block> = (0..n.div_ceil(CHUNK))
         .into_par_iter()
         .map(|blk| {
@@ -31,13 +32,13 @@ pub(super) fn interpolation(
                     continue;
                 }
                 row.clear();
-                let mut den = g.dir[i];
+                let dir = g.reservoir(i);
+                let mut den = dir;
                 // Strong C neighbours first (their fine index and w_ij).
-                for p in g.ptr[i]..g.ptr[i + 1] {
-                    let j = g.col[p] as usize;
-                    if strong(g.w[p], wmax[i]) && cidx[j] != NONE {
-                        row.push((j as u32, g.w[p]));
-                        den += g.w[p];
+                for (j, wij) in g.row(i) {
+                    if strong(wij, wmax[i]) && cidx[j as usize] != NONE {
+                        row.push((j, wij));
+                        den += wij;
                     }
                 }
                 if row.is_empty() {
@@ -46,9 +47,8 @@ pub(super) fn interpolation(
                     continue;
                 }
                 // Strong F neighbours: distributed over the strong C neighbours of i.
-                for p in g.ptr[i]..g.ptr[i + 1] {
-                    let k = g.col[p] as usize;
-                    let wik = g.w[p];
+                for (k, wik) in g.row(i) {
+                    let k = k as usize;
                     if !strong(wik, wmax[i]) || cidx[k] != NONE {
                         continue;
                     }
@@ -73,15 +73,15 @@ pub(super) fn interpolation(
                 len.push(row.len());
                 for &(j, v) in row.iter() {
                     col.push(cidx[j as usize]);
-                    val.push(v / den);
+                    val.push((v / den) as f32);
                 }
-                delta.push(g.dir[i] / den);
+                delta.push(dir / den);
             }
             (len, col, val, delta)
         })
         .collect();
     let mut deltas = Vec::with_capacity(n);
-    let blocks: Vec<(Vec<usize>, Vec<u32>, Vec<f64>)> = blocks
+    let blocks: Vec<(Vec<usize>, Vec<u32>, Vec<f32>)> = blocks
         .into_iter()
         .map(|(l, c, v, d)| {
             deltas.extend_from_slice(&d);
@@ -99,7 +99,7 @@ pub(super) fn interpolation(
     }
     let mut fill = tptr[..nc].to_vec();
     let mut trow = vec![0u32; col.len()];
-    let mut tval = vec![0.0; col.len()];
+    let mut tval = vec![0.0f32; col.len()];
     for i in 0..n {
         for p in ptr[i]..ptr[i + 1] {
             let c = col[p] as usize;

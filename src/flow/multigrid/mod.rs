@@ -23,10 +23,12 @@
 //!   deterministic): repeatedly the undecided unknown on which most undecided ones depend
 //!   strongly becomes C and its strong dependents F; then a second pass in unknown order:
 //!   a strong F neighbour `k` of an F unknown `i` joined to none of the strong C neighbours
-//!   of `i` becomes C. Without it the interpolation lumps such `w_ik` and the cycle
-//!   contracts the error by only about 0.5–0.6 per CG step on near-threshold gaps; with it
-//!   about 0.15–0.4 (the iterations to the default tolerance drop from 73–78 to 42–43 at
-//!   1025² and 2049², docs/flow.md), for some 10 % more operator complexity;
+//!   of `i` becomes C. Without the second pass the interpolation lumps such `w_ik` and the
+//!   cycle contracts the error by only about 0.5–0.6 per CG step on near-threshold gaps;
+//!   with it about 0.15–0.4 (the iterations to the default tolerance drop from 73–78 to
+//!   42–43 at 1025² and 2049², docs/flow.md), for some 10 % more operator complexity.
+//!   The code can also split fixed blocks of unknowns in parallel, the same for any thread
+//!   count, but the seams cost iterations (`SPLIT_BLOCK`, one block by default);
 //! - interpolation to an F unknown `i`, classical with lumping: weak faces go to the
 //!   diagonal, a strong F neighbour `k` is distributed over the strong C neighbours of `i`
 //!   in proportion to `w_km` (lumped to the diagonal when it has none):
@@ -60,15 +62,26 @@
 //! dense Cholesky factor. Block boundaries and every sum's order are fixed, so the bits do
 //! not depend on the thread count.
 //!
-//! The finest level is built in compressed rows like the others (the setup reads rows by
-//! index), then freed: the cycle applies it from the grid stencil through the map from
-//! cells to unknowns (4 bytes per cell instead of some 56 per unknown).
+//! # Storage
+//!
+//! The finest level is never copied into compressed rows: the setup reads its rows from
+//! the grid stencil through the map from cells to unknowns ([`rows`]), and the cycle
+//! applies it from the stencil too (4 bytes per cell instead of some 56 per unknown).
+//! Coarse faces and interpolation weights are stored in single precision; each coarse
+//! diagonal is summed from the rounded faces, so a level is exactly the conductance form of
+//! its rounded faces (each face changed by at most 2^-24 of itself: where the faces are
+//! positive the level's energy `Σ w_ij (x_i − x_j)² + Σ dir_i x_i²` changes by at most that
+//! fraction, however ill-conditioned the level) and the next level is built from what is stored. Vectors, the cycle's
+//! arithmetic and CG stay in double precision: the preconditioner changes a little, the
+//! answer is that of the exact fine operator. Each level's reservoir part is freed once
+//! the level below it is built.
 
 mod coarsen;
 mod coarsest;
 mod cycle;
 mod galerkin;
 mod interpolate;
+mod rows;
 #[cfg(test)]
 mod tests;
 
@@ -79,10 +92,13 @@ use rayon::prelude::*;
 use super::assemble::Stencil;
 use super::cg::CHUNK;
 use coarsen::{split, strong, strongest};
+#[cfg(test)]
+use coarsen::{split_in_blocks, SPLIT_BLOCK};
 use coarsest::DenseCholesky;
 use cycle::{vcycle, Fine, SharedMut};
 use galerkin::galerkin;
 use interpolate::interpolation;
+use rows::Rows;
 
 /// Strength threshold θ.
 const THETA: f64 = 0.25;
@@ -106,7 +122,9 @@ struct Graph {
     n: usize,
     ptr: Vec<usize>,
     col: Vec<u32>,
-    w: Vec<f64>,
+    /// Faces in single precision (`d` is summed from the rounded faces: the level is the
+    /// conductance form of its rounded faces exactly).
+    w: Vec<f32>,
     dir: Vec<f64>,
     d: Vec<f64>,
 }
@@ -115,18 +133,19 @@ struct Graph {
 struct Interp {
     ptr: Vec<usize>,
     col: Vec<u32>,
-    val: Vec<f64>,
+    /// Weights in single precision.
+    val: Vec<f32>,
     tptr: Vec<usize>,
     trow: Vec<u32>,
-    tval: Vec<f64>,
+    tval: Vec<f32>,
 }
 
 /// Work vectors of one level.
 struct Buffers {
     x: Vec<f64>,
     b: Vec<f64>,
+    /// Residual, and the sweeps' scratch.
     r: Vec<f64>,
-    old: Vec<f64>,
 }
 
 /// The multigrid hierarchy (one V-cycle per application).
@@ -145,12 +164,14 @@ pub struct Multigrid {
     coarse: DenseCholesky,
 }
 
-/// Bytes of the hierarchy for `unknowns` fine unknowns: while it is built (the finest level
-/// still in compressed rows) [`Multigrid::bytes`] measured 321 to 328 bytes per unknown on
-/// contact gaps from 1025² to 4097² (operator complexity 2.25 to 2.36), plus the setup's
-/// transient vectors; about 70 fewer once built.
+/// Bytes of the hierarchy for `unknowns` fine unknowns, its setup's transient vectors
+/// included. Built, [`Multigrid::bytes`] is 165–166 bytes per unknown on random fields with
+/// a third of the cells closed (operator complexity 2.2; `multigrid_memory_estimate_is_honest`
+/// in the tests): single-precision faces and weights, the finest level never in compressed
+/// rows. Measured on contact gaps (docs/flow.md): the resident set grows by about 150
+/// bytes per unknown from the start to the end of the setup at 4097² and 8193².
 pub fn memory_estimate(unknowns: usize) -> u64 {
-    unknowns as u64 * 360
+    unknowns as u64 * 220
 }
 
 impl Graph {
@@ -162,7 +183,7 @@ impl Graph {
                 let i = i0 + t;
                 let mut v = b[i] - self.d[i] * x[i];
                 for p in self.ptr[i]..self.ptr[i + 1] {
-                    v += self.w[p] * x[self.col[p] as usize];
+                    v += f64::from(self.w[p]) * x[self.col[p] as usize];
                 }
                 *rv = v;
             }
@@ -182,13 +203,14 @@ impl Graph {
                 let mut out = 0.0;
                 for p in self.ptr[i]..self.ptr[i + 1] {
                     let j = self.col[p] as usize;
+                    let w = f64::from(self.w[p]);
                     let xj = if j >= i0 && j < i1 {
                         xc[j - i0]
                     } else {
-                        out += self.w[p].abs();
+                        out += w.abs();
                         old[j]
                     };
-                    v += self.w[p] * xj;
+                    v += w * xj;
                 }
                 xc[t] += v / (self.d[i] + out);
             };
@@ -209,20 +231,21 @@ impl Graph {
         self.col.len()
     }
 
-    /// `w_ij` (0 when `j` is not a neighbour of `i`).
-    #[inline]
-    fn weight(&self, i: usize, j: u32) -> f64 {
-        let row = self.ptr[i]..self.ptr[i + 1];
-        match self.col[row.clone()].binary_search(&j) {
-            Ok(p) => self.w[row.start + p],
-            Err(_) => 0.0,
+    /// A level of `n` unknowns without stored rows (the finest, applied from the stencil).
+    fn sized(n: usize) -> Self {
+        Graph {
+            n,
+            ptr: Vec::new(),
+            col: Vec::new(),
+            w: Vec::new(),
+            dir: Vec::new(),
+            d: Vec::new(),
         }
     }
 }
 
-/// The fine operator on its active cells: the graph, the cell of each unknown and the
-/// unknown of each cell.
-fn fine_graph(st: &Stencil) -> (Graph, Vec<u32>, Vec<u32>) {
+/// The cell of each unknown (the active cells in grid order) and the unknown of each cell.
+fn unknowns(st: &Stencil) -> (Vec<u32>, Vec<u32>) {
     let n = st.ny * st.nx;
     let mut index = vec![NONE; n];
     let mut cells = Vec::new();
@@ -232,55 +255,22 @@ fn fine_graph(st: &Stencil) -> (Graph, Vec<u32>, Vec<u32>) {
             cells.push(k as u32);
         }
     }
-    let m = cells.len();
-    type Block = (Vec<usize>, Vec<u32>, Vec<f64>);
-    let blocks: Vec<Block> = cells
-        .par_chunks(CHUNK)
-        .map(|cs| {
-            let mut len = Vec::with_capacity(cs.len());
-            let mut col = Vec::with_capacity(4 * cs.len());
-            let mut w = Vec::with_capacity(4 * cs.len());
-            for &k in cs {
-                let mut row: [(u32, f64); 4] = [(NONE, 0.0); 4];
-                let mut nb = 0;
-                st.for_each_face(k as usize, |l, c| {
-                    let t = index[l];
-                    if t == NONE {
-                        return;
-                    }
-                    // The two faces of a 2-wide periodic row join the same pair: add them.
-                    if let Some(e) = row[..nb].iter_mut().find(|e| e.0 == t) {
-                        e.1 += c;
-                    } else {
-                        row[nb] = (t, c);
-                        nb += 1;
-                    }
-                });
-                row[..nb].sort_unstable_by_key(|e| e.0);
-                len.push(nb);
-                for &(t, c) in &row[..nb] {
-                    col.push(t);
-                    w.push(c);
-                }
-            }
-            (len, col, w)
-        })
-        .collect();
-    let (ptr, col, w) = concat(blocks);
-    let dir: Vec<f64> = cells.par_iter().map(|&k| st.dir[k as usize]).collect();
-    let d: Vec<f64> = cells.par_iter().map(|&k| st.d[k as usize]).collect();
-    (
-        Graph {
-            n: m,
-            ptr,
-            col,
-            w,
-            dir,
-            d,
-        },
-        cells,
-        index,
-    )
+    (cells, index)
+}
+
+/// One coarsening step below `g`: the interpolation and the coarse operator; `None` when
+/// the splitting keeps no unknown or more than [`MIN_REDUCTION`] of them.
+fn coarsen(g: &impl Rows) -> Option<(Interp, Graph)> {
+    let n = g.n();
+    let wmax = strongest(g);
+    let (cidx, nc) = split(g, &wmax);
+    if nc == 0 || nc as f64 > MIN_REDUCTION * n as f64 {
+        return None;
+    }
+    let (ip, delta) = interpolation(g, &wmax, &cidx, nc);
+    drop((cidx, wmax));
+    let c = galerkin(g, &ip, &delta, nc);
+    Some((ip, c))
 }
 
 /// Row blocks (row lengths, columns, values) concatenated in order into compressed rows.
@@ -302,24 +292,43 @@ fn concat<T: Copy>(blocks: Vec<(Vec<usize>, Vec<u32>, Vec<T>)>) -> (Vec<usize>, 
 }
 
 impl Multigrid {
-    /// Builds the hierarchy below the fine operator `fine` (moved in).
+    /// Builds the hierarchy below the fine operator `fine` (moved in). The first coarse
+    /// level is built from the stencil's rows directly; each level's reservoir part is
+    /// freed once the level below it is built.
     pub fn new(fine: Stencil) -> Self {
-        let (g0, cells, index) = fine_graph(&fine);
-        let mut levels = vec![g0];
+        let (cells, index) = unknowns(&fine);
+        let top = Fine {
+            st: &fine,
+            cells: &cells,
+            index: &index,
+        };
+        let n0 = cells.len();
+        let fine_entries: usize = (0..n0)
+            .into_par_iter()
+            .with_min_len(CHUNK)
+            .map(|i| top.row(i).count())
+            .sum();
+        let mut levels = Vec::new();
         let mut interps = Vec::new();
+        if n0 > COARSEST {
+            if let Some((ip, c)) = coarsen(&top) {
+                // The finest level: its size only (the cycle applies the stencil).
+                levels.push(Graph::sized(n0));
+                interps.push(ip);
+                levels.push(c);
+            }
+        }
+        if levels.is_empty() {
+            // The finest level is the coarsest: factored from the stencil's rows (exact).
+            levels.push(Graph::sized(n0));
+        }
         loop {
             let g = levels.last().expect("non-empty");
             if g.n <= COARSEST || levels.len() >= MAX_LEVELS {
                 break;
             }
-            let wmax = strongest(g);
-            let (cidx, nc) = split(g, &wmax);
-            if nc == 0 || nc as f64 > MIN_REDUCTION * g.n as f64 {
-                break;
-            }
-            let (ip, delta) = interpolation(g, &wmax, &cidx, nc);
-            drop((cidx, wmax));
-            let c = galerkin(g, &ip, &delta, nc);
+            let Some((ip, c)) = coarsen(g) else { break };
+            levels.last_mut().expect("non-empty").dir = Vec::new();
             interps.push(ip);
             levels.push(c);
         }
@@ -331,21 +340,14 @@ impl Multigrid {
                     x: vec![0.0; n],
                     b: vec![0.0; n],
                     r: vec![0.0; n],
-                    old: vec![0.0; n],
                 }
             })
             .collect();
-        let coarse = DenseCholesky::new(levels.last().expect("non-empty"));
-        // The cycle applies the finest level from the grid stencil (the same faces), and no
-        // level needs its reservoir part any more: free them.
-        let fine_entries = levels[0].entries();
-        if levels.len() > 1 {
-            let g0 = &mut levels[0];
-            g0.ptr = Vec::new();
-            g0.col = Vec::new();
-            g0.w = Vec::new();
-            g0.d = Vec::new();
-        }
+        let coarse = if levels.len() == 1 {
+            DenseCholesky::new(&top)
+        } else {
+            DenseCholesky::new(levels.last().expect("non-empty"))
+        };
         for g in levels.iter_mut() {
             g.dir = Vec::new();
         }
@@ -373,9 +375,11 @@ impl Multigrid {
 
     /// Bytes held by the hierarchy (the fine stencil not counted).
     pub fn bytes(&self) -> u64 {
+        // Per entry: column 4 + single-precision value 4 (interpolation: both by rows and by
+        // columns); per row: pointer, diagonal, reservoir part, and 3 work vectors.
         let g =
-            |g: &Graph| 8 * (g.ptr.len() + g.dir.len() + g.d.len()) + 12 * g.col.len() + 32 * g.n;
-        let p = |p: &Interp| 8 * (p.ptr.len() + p.tptr.len()) + 24 * p.col.len();
+            |g: &Graph| 8 * (g.ptr.len() + g.dir.len() + g.d.len()) + 8 * g.col.len() + 24 * g.n;
+        let p = |p: &Interp| 8 * (p.ptr.len() + p.tptr.len()) + 16 * p.col.len();
         (4 * (self.cells.len() + self.index.len())
             + self.levels.iter().map(g).sum::<usize>()
             + self.interps.iter().map(p).sum::<usize>()) as u64

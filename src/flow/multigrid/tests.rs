@@ -1,3 +1,4 @@
+use super::cycle::Fine;
 use super::*;
 use crate::flow::assemble::fine_stencil;
 
@@ -27,28 +28,91 @@ fn rough(seed: u64, ny: usize, nx: usize) -> Stencil {
 
 #[test]
 fn every_strong_f_pair_shares_a_c_neighbour() {
-    for seed in 0..3 {
+    for seed in 0..4 {
         let st = rough(seed, 60, 50);
-        let (g, _, _) = fine_graph(&st);
+        let (cells, index) = unknowns(&st);
+        let g = Fine {
+            st: &st,
+            cells: &cells,
+            index: &index,
+        };
         let wmax = strongest(&g);
-        let (cidx, nc) = split(&g, &wmax);
-        assert!(nc > 0 && nc < g.n);
-        for i in (0..g.n).filter(|&i| cidx[i] == NONE) {
-            let row = g.ptr[i]..g.ptr[i + 1];
-            let ci: Vec<u32> = row
-                .clone()
-                .filter(|&p| strong(g.w[p], wmax[i]) && cidx[g.col[p] as usize] != NONE)
-                .map(|p| g.col[p])
+        // One block (3000 unknowns at most), and blocks of 97 unknowns: the pairs across
+        // block boundaries too.
+        let block = if seed >= 2 { 97 } else { SPLIT_BLOCK };
+        let (cidx, nc) = split_in_blocks(&g, &wmax, block);
+        assert!(nc > 0 && nc < g.n());
+        for i in (0..g.n()).filter(|&i| cidx[i] == NONE) {
+            let ci: Vec<u32> = g
+                .row(i)
+                .filter(|&(j, w)| strong(w, wmax[i]) && cidx[j as usize] != NONE)
+                .map(|(j, _)| j)
                 .collect();
             assert!(!ci.is_empty(), "F unknown {i} has no strong C neighbour");
-            for p in row {
-                let k = g.col[p] as usize;
-                if cidx[k] == NONE && strong(g.w[p], wmax[i]) {
+            for (k, w) in g.row(i) {
+                if cidx[k as usize] == NONE && strong(w, wmax[i]) {
                     assert!(
-                        ci.iter().any(|&m| g.weight(k, m) > 0.0),
+                        ci.iter().any(|&m| g.weight(k as usize, m) > 0.0),
                         "strong F pair {i}, {k} without a common C neighbour"
                     );
                 }
+            }
+        }
+    }
+}
+
+#[test]
+fn fine_rows_from_the_stencil_are_its_faces() {
+    // The rows read from the stencil against brute force over the grid's face arrays.
+    for periodic in [false, true] {
+        for (ny, nx) in [(7, 2), (9, 5)] {
+            let c: Vec<f64> = uniform(3, ny * nx)
+                .iter()
+                .map(|&u| if u < 0.2 { 0.0 } else { u })
+                .collect();
+            let st = fine_stencil(&c, ny, nx, periodic).0;
+            let (cells, index) = unknowns(&st);
+            let g = Fine {
+                st: &st,
+                cells: &cells,
+                index: &index,
+            };
+            for (i, &k) in cells.iter().enumerate() {
+                let k = k as usize;
+                let (r, col) = (k / nx, k % nx);
+                let mut want: Vec<(u32, f64)> = Vec::new();
+                let mut face = |l: usize, w: f64| {
+                    if w > 0.0 && index[l] != NONE {
+                        match want.iter_mut().find(|e| e.0 == index[l]) {
+                            Some(e) => e.1 += w,
+                            None => want.push((index[l], w)),
+                        }
+                    }
+                };
+                if col + 1 < nx {
+                    face(k + 1, st.e[k]);
+                } else if periodic {
+                    face(r * nx, st.e[k]);
+                }
+                if col > 0 {
+                    face(k - 1, st.e[k - 1]);
+                } else if periodic {
+                    face(r * nx + nx - 1, st.e[r * nx + nx - 1]);
+                }
+                if r + 1 < ny {
+                    face(k + nx, st.s[k]);
+                }
+                if r > 0 {
+                    face(k - nx, st.s[k - nx]);
+                }
+                want.sort_by_key(|e| e.0);
+                let got: Vec<(u32, f64)> = g.row(i).collect();
+                assert_eq!(got, want, "row {i} ({ny} × {nx}, periodic {periodic})");
+                for &(j, w) in &want {
+                    assert_eq!(g.weight(i, j), w);
+                }
+                assert_eq!(g.diag(i), st.d[k]);
+                assert_eq!(g.reservoir(i), st.dir[k]);
             }
         }
     }
@@ -70,4 +134,54 @@ fn cycle_is_symmetric_and_positive() {
     let scale = dot(&u, &u).sqrt() * dot(&mv, &mv).sqrt();
     assert!((a - b).abs() <= 1e-12 * scale, "u·Mv = {a}, v·Mu = {b}");
     assert!(dot(&u, &mu) > 0.0 && dot(&v, &mv) > 0.0);
+}
+
+#[test]
+fn multigrid_memory_estimate_is_honest() {
+    // Random fields with closed cells (a third) and six decades of conductance: the
+    // hierarchy's bytes stay below the estimate, and the estimate within twice them.
+    for (seed, ny, nx) in [(11, 300, 200), (12, 256, 256)] {
+        let u = uniform(seed, ny * nx);
+        let c: Vec<f64> = uniform(seed + 100, ny * nx)
+            .iter()
+            .zip(&u)
+            .map(|(&v, &o)| if o < 0.33 { 0.0 } else { 10f64.powf(-6.0 * v) })
+            .collect();
+        let st = fine_stencil(&c, ny, nx, true).0;
+        let m = st.active.iter().filter(|&&a| a).count();
+        let mg = Multigrid::new(st);
+        let (bytes, est) = (mg.bytes(), memory_estimate(m));
+        println!(
+            "{ny} × {nx}: {m} unknowns, {:.0} bytes per unknown, complexity {:.2}",
+            bytes as f64 / m as f64,
+            mg.complexity()
+        );
+        assert!(mg.n_levels() >= 4);
+        assert!(
+            bytes <= est && 2 * bytes >= est,
+            "{bytes} bytes ({:.0} per unknown, complexity {:.2}) against the estimate {est}",
+            bytes as f64 / m as f64,
+            mg.complexity()
+        );
+    }
+}
+
+#[test]
+fn split_in_blocks_is_the_same_on_one_and_two_threads() {
+    let st = rough(5, 80, 70);
+    let (cells, index) = unknowns(&st);
+    let g = Fine {
+        st: &st,
+        cells: &cells,
+        index: &index,
+    };
+    let wmax = strongest(&g);
+    let run = |threads: usize| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .expect("a pool")
+            .install(|| split_in_blocks(&g, &wmax, 211))
+    };
+    assert_eq!(run(1), run(2));
 }
