@@ -53,9 +53,9 @@ const BLOCK: usize = 2;
 const BLOCK_MAX_CELLS: usize = 20_000;
 
 /// Iterative-refinement steps at most per right-hand side.
-const REFINE: usize = 4;
+pub const REFINE: usize = 4;
 
-/// Refinement stops once the relative residual is at or below this.
+/// [`Factor::solve`] stops refining once the relative residual is at or below this.
 const REFINED: f64 = 1e-15;
 
 fn failed(what: impl std::fmt::Display) -> Error {
@@ -149,7 +149,7 @@ impl Factor {
                 )
                 .map_err(|e| failed(format!("{e:?}")))?;
         }
-        let solve_buf = MemBuffer::try_new(symbolic.solve_in_place_scratch::<f64>(1, par))
+        let solve_buf = MemBuffer::try_new(symbolic.solve_in_place_scratch::<f64>(2, par))
             .map_err(|_| failed("out of memory"))?;
         Ok(Factor {
             cells,
@@ -164,9 +164,14 @@ impl Factor {
         self.values.len()
     }
 
-    fn solve_cells(&mut self, b: &[f64], x: &mut [f64], add: bool) {
+    /// `x = A⁻¹ b` (or `x += A⁻¹ b` with `add`) on the active cells for each pair `(b, x)`
+    /// of `cols`, all columns in one pass over the factor.
+    fn solve_cells(&mut self, cols: &mut [(&[f64], &mut [f64])], add: bool) {
         let m = self.cells.len();
-        let mut sol = Mat::<f64>::from_fn(m, 1, |r, _| b[self.cells[r]]);
+        if m == 0 {
+            return;
+        }
+        let mut sol = Mat::<f64>::from_fn(m, cols.len(), |r, c| cols[c].0[self.cells[r]]);
         let llt = LltRef::<'_, usize, f64>::new(&self.symbolic, &self.values);
         llt.solve_in_place_with_conj(
             Conj::No,
@@ -174,30 +179,44 @@ impl Factor {
             Par::Seq,
             MemStack::new(&mut self.solve_buf),
         );
-        for (r, &k) in self.cells.iter().enumerate() {
-            if add {
-                x[k] += sol[(r, 0)];
-            } else {
-                x[k] = sol[(r, 0)];
+        for (c, (_, x)) in cols.iter_mut().enumerate() {
+            for (r, &k) in self.cells.iter().enumerate() {
+                if add {
+                    x[k] += sol[(r, c)];
+                } else {
+                    x[k] = sol[(r, c)];
+                }
             }
         }
     }
 
-    /// `A x = b` on the active cells (0 elsewhere), refined against `st` with residuals in
-    /// double-double arithmetic ([`Stencil::residual_compensated`]) until the relative
-    /// residual is at most [`REFINED`] or [`REFINE`] steps were taken. Returns the relative
-    /// residual `‖b − A x‖₂ / ‖b‖₂`.
+    /// `A x = b` for the two right-hand sides of a flow (inlet and outlet), from the factor
+    /// alone: `x1 = A⁻¹ b1`, `x2 = A⁻¹ b2` on the active cells, 0 elsewhere.
+    pub fn solve_pair(&mut self, b1: &[f64], b2: &[f64], x1: &mut [f64], x2: &mut [f64]) {
+        x1.iter_mut().for_each(|v| *v = 0.0);
+        x2.iter_mut().for_each(|v| *v = 0.0);
+        self.solve_cells(&mut [(b1, x1), (b2, x2)], false);
+    }
+
+    /// `x1 += A⁻¹ r1`, `x2 += A⁻¹ r2` on the active cells: one refinement step of both.
+    pub fn correct_pair(&mut self, r1: &[f64], r2: &[f64], x1: &mut [f64], x2: &mut [f64]) {
+        self.solve_cells(&mut [(r1, x1), (r2, x2)], true);
+    }
+
+    /// `A x = b` on the active cells (0 elsewhere), refined with double-double residuals
+    /// ([`Stencil::residual_compensated`]) until the relative residual is at most
+    /// [`REFINED`], a step no longer halves it (the factor's error is then as large as the
+    /// correction: a condition number near 1/ε) or [`REFINE`] steps were taken; a step that
+    /// made it worse is undone.
+    /// Returns the relative residual `‖b − A x‖₂ / ‖b‖₂`.
     pub fn solve(&mut self, st: &Stencil, b: &[f64], x: &mut [f64]) -> f64 {
         x.iter_mut().for_each(|v| *v = 0.0);
         let bnorm = cg::dot(b, b).sqrt();
-        if bnorm == 0.0 || self.cells.is_empty() {
+        if bnorm == 0.0 {
             return 0.0;
         }
-        self.solve_cells(b, x, false);
+        self.solve_cells(&mut [(b, &mut *x)], false);
         let mut res = vec![0.0; b.len()];
-        // Stop at REFINED, after REFINE steps, or when a step no longer halves the residual
-        // (the factor's error is then as large as the correction: a condition number near
-        // 1/ε); a step that made it worse is undone.
         let mut best = f64::INFINITY;
         let mut best_x = x.to_vec();
         for step in 0..=REFINE {
@@ -213,7 +232,7 @@ impl Factor {
                 break;
             }
             best_x.copy_from_slice(x);
-            self.solve_cells(&res, x, true);
+            self.solve_cells(&mut [(&res, &mut *x)], true);
         }
         best
     }

@@ -55,7 +55,8 @@ use multigrid::Multigrid;
 
 use axis0::solve_axis0;
 use paths::{
-    available_memory, cholesky_estimate, solve_direct, solve_gth, solve_multigrid, trusted,
+    available_memory, cholesky_estimate, solve_direct, solve_gth, solve_multigrid, split_direct,
+    trusted,
 };
 pub use paths::{CONSERVATION_MAX, FLUX_AGREEMENT};
 
