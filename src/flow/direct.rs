@@ -8,14 +8,21 @@
 //!
 //! # Ordering
 //!
-//! The fill-reducing order is approximate minimum degree (faer's AMD), on small pieces over
-//! 2 × 2 blocks of cells ([`BLOCK`]), on pieces of the grid:
+//! The fill-reducing order is approximate minimum degree (faer's AMD), over 2 × 2 blocks of
+//! cells ([`BLOCK`]) on pieces of up to a million cells (except 20,000 to 65,536), on
+//! pieces of the grid:
 //! the grid is cut in two by its middle row (or, without wrap and wider than tall, its
 //! middle column), each half cut again ([`SPLIT_DEPTH`] times, pieces of at least
 //! [`SPLIT_MIN`] cells); the pieces are ordered independently, in parallel, and the
 //! separators come last. A separator couples only the two pieces it divides, so the order
 //! does not depend on the thread count. The minimum-degree step is the costliest part of the
 //! analysis on large grids; this puts every core on it for a little more fill.
+//!
+//! A full nested dissection by grid rows and columns (pieces cut down to 64–16,384 cells,
+//! a wrapped grid first opened by its last column) orders in a fifth to a half of the
+//! time, but these gaps are not full grids: the minimum-degree order follows their
+//! channels and has half the fill (13.5 against 26–38 entries per unknown at 513², 24
+//! against 29–32 at 1025²), which the solves pay for (docs/flow.md).
 //!
 //! # Memory
 //!
@@ -41,16 +48,26 @@ const SPLIT_DEPTH: usize = 1;
 const SPLIT_MIN: usize = 1 << 16;
 
 /// Side of the square blocks of cells the minimum-degree order is computed on, for pieces of
-/// at most [`BLOCK_MAX_CELLS`] cells (cell by cell above). On small grids faer's supernodal
-/// factorisation spends its time per supernode more than per flop: the order of 2 × 2 blocks,
-/// whose factor has 2.5× the entries of the cell-by-cell order, takes a quarter of the time
-/// to compute and its factor is no slower, so a flow at 97² to 129² takes 20–30 % less time
-/// (spectral H = 0.9 gaps at 0–13 % contact, and the levels of RMD sweeps). From 161² on
-/// the extra entries cost more than the blocks save (measured at 161², 193², 225², 257²).
+/// at most [`BLOCK_MAX_CELLS`] cells and pieces of [`BLOCK_FROM_CELLS`] to
+/// [`BLOCK_UPTO_CELLS`] cells (cell by cell otherwise). faer's supernodal factorisation
+/// spends its time per supernode more than per flop, and the minimum-degree step costs
+/// about in proportion to the nodes it orders: the order of 2 × 2 blocks, whose factor has
+/// 1.8–2.6× the entries of the cell-by-cell order, takes a quarter of the time to compute
+/// and its factor is no slower up to about a million cells a piece. On the contact gaps of
+/// the flow benchmarks (one thread) a whole flow takes 20–30 % less time at 97² to 129²,
+/// 36 % less at 513² and 18–38 % less at 1025² (two gaps); at 257² (pieces of 33,000
+/// cells) it took 15 % more, and at 2049² (pieces of 2.1 million cells: 1.9–2.2× the
+/// entries, the numeric factor 1.2–2.7× slower) 23 % more (docs/flow.md).
 const BLOCK: usize = 2;
 
-/// Largest piece (cells of its rectangle) ordered by [`BLOCK`]-sized blocks.
+/// Largest small piece (cells of its rectangle) ordered by [`BLOCK`]-sized blocks.
 const BLOCK_MAX_CELLS: usize = 20_000;
+
+/// Smallest large piece ordered by [`BLOCK`]-sized blocks.
+const BLOCK_FROM_CELLS: usize = 1 << 16;
+
+/// Largest large piece ordered by [`BLOCK`]-sized blocks.
+const BLOCK_UPTO_CELLS: usize = 1 << 20;
 
 /// Iterative-refinement steps at most per right-hand side.
 pub const REFINE: usize = 4;
@@ -324,7 +341,7 @@ fn region_order(
 
 /// Approximate-minimum-degree order of the unknowns in one rectangle of the grid (faces to
 /// cells outside it do not count: those cells are separators, eliminated later), computed on
-/// square blocks of cells ([`BLOCK`] on small rectangles, single cells otherwise): two blocks
+/// square blocks of cells ([`BLOCK`] on the rectangles listed there, single cells otherwise): two blocks
 /// are neighbours when a face with positive conductance joins them, and each block's
 /// unknowns follow one another, row-major, at the block's place in the order.
 fn amd_region(
@@ -337,7 +354,9 @@ fn amd_region(
     let nx = st.nx;
     let (h, w) = (r.1 - r.0, c.1 - c.0);
     let wrap = st.periodic && c == (0, nx) && nx > 2;
-    let blk = if h * w <= BLOCK_MAX_CELLS { BLOCK } else { 1 };
+    let cells = h * w;
+    let blocks = cells <= BLOCK_MAX_CELLS || (BLOCK_FROM_CELLS..=BLOCK_UPTO_CELLS).contains(&cells);
+    let blk = if blocks { BLOCK } else { 1 };
     let (bh, bw) = (h.div_ceil(blk), w.div_ceil(blk));
     let block_of = |i: usize, j: usize| ((i - r.0) / blk) * bw + (j - c.0) / blk;
     // Blocks holding unknowns, numbered in raster order.
