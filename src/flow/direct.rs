@@ -70,7 +70,7 @@ const BLOCK_FROM_CELLS: usize = 1 << 16;
 const BLOCK_UPTO_CELLS: usize = 1 << 20;
 
 /// Iterative-refinement steps at most per right-hand side.
-pub const REFINE: usize = 4;
+const REFINE: usize = 4;
 
 /// [`Factor::solve`] stops refining once the relative residual is at or below this.
 const REFINED: f64 = 1e-15;
