@@ -291,10 +291,35 @@ fn lower_csc(st: &Stencil, index: &[usize], cells: &[usize]) -> (Vec<usize>, Vec
 }
 
 /// Elimination order (new position → unknown) of the unknowns `index` (grid cell → unknown,
-/// `usize::MAX` for none); see the module docs.
+/// `usize::MAX` for none) for the factor; see the module docs.
 pub(super) fn ordering(st: &Stencil, index: &[usize], m: usize) -> Vec<usize> {
     let mut out = Vec::with_capacity(m);
-    region_order(st, index, (0, st.ny), (0, st.nx), SPLIT_DEPTH, &mut out);
+    region_order(
+        st,
+        index,
+        (0, st.ny),
+        (0, st.nx),
+        SPLIT_DEPTH,
+        true,
+        &mut out,
+    );
+    out
+}
+
+/// [`ordering`] with blocks on the small pieces only (at most [`BLOCK_MAX_CELLS`] cells), for
+/// the cancellation-free elimination ([`super::gth`]), whose cost grows with the fill more
+/// than the supernodal factor's.
+pub(super) fn elimination_ordering(st: &Stencil, index: &[usize], m: usize) -> Vec<usize> {
+    let mut out = Vec::with_capacity(m);
+    region_order(
+        st,
+        index,
+        (0, st.ny),
+        (0, st.nx),
+        SPLIT_DEPTH,
+        false,
+        &mut out,
+    );
     out
 }
 
@@ -304,6 +329,7 @@ fn region_order(
     r: (usize, usize),
     c: (usize, usize),
     depth: usize,
+    large_blocks: bool,
     out: &mut Vec<usize>,
 ) {
     let (h, w) = (r.1 - r.0, c.1 - c.0);
@@ -314,7 +340,7 @@ fn region_order(
     let by_rows = (st.periodic && c == (0, st.nx)) || h >= w;
     let long = if by_rows { h } else { w };
     if depth == 0 || h * w < 2 * SPLIT_MIN || long < 3 {
-        amd_region(st, index, r, c, out);
+        amd_region(st, index, r, c, large_blocks, out);
         return;
     }
     let (mut a, mut b) = (Vec::new(), Vec::new());
@@ -322,15 +348,35 @@ fn region_order(
     let sep: Vec<usize> = if by_rows {
         let mid = r.0 + h / 2;
         rayon::join(
-            || region_order(st, index, (r.0, mid), c, depth - 1, &mut a),
-            || region_order(st, index, (mid + 1, r.1), c, depth - 1, &mut b),
+            || region_order(st, index, (r.0, mid), c, depth - 1, large_blocks, &mut a),
+            || {
+                region_order(
+                    st,
+                    index,
+                    (mid + 1, r.1),
+                    c,
+                    depth - 1,
+                    large_blocks,
+                    &mut b,
+                )
+            },
         );
         (c.0..c.1).map(|j| index[mid * nx + j]).collect()
     } else {
         let mid = c.0 + w / 2;
         rayon::join(
-            || region_order(st, index, r, (c.0, mid), depth - 1, &mut a),
-            || region_order(st, index, r, (mid + 1, c.1), depth - 1, &mut b),
+            || region_order(st, index, r, (c.0, mid), depth - 1, large_blocks, &mut a),
+            || {
+                region_order(
+                    st,
+                    index,
+                    r,
+                    (mid + 1, c.1),
+                    depth - 1,
+                    large_blocks,
+                    &mut b,
+                )
+            },
         );
         (r.0..r.1).map(|i| index[i * nx + mid]).collect()
     };
@@ -341,7 +387,8 @@ fn region_order(
 
 /// Approximate-minimum-degree order of the unknowns in one rectangle of the grid (faces to
 /// cells outside it do not count: those cells are separators, eliminated later), computed on
-/// square blocks of cells ([`BLOCK`] on the rectangles listed there, single cells otherwise): two blocks
+/// square blocks of cells ([`BLOCK`] on the rectangles listed there, the large ones only with
+/// `large_blocks`; single cells otherwise): two blocks
 /// are neighbours when a face with positive conductance joins them, and each block's
 /// unknowns follow one another, row-major, at the block's place in the order.
 fn amd_region(
@@ -349,13 +396,15 @@ fn amd_region(
     index: &[usize],
     r: (usize, usize),
     c: (usize, usize),
+    large_blocks: bool,
     out: &mut Vec<usize>,
 ) {
     let nx = st.nx;
     let (h, w) = (r.1 - r.0, c.1 - c.0);
     let wrap = st.periodic && c == (0, nx) && nx > 2;
     let cells = h * w;
-    let blocks = cells <= BLOCK_MAX_CELLS || (BLOCK_FROM_CELLS..=BLOCK_UPTO_CELLS).contains(&cells);
+    let blocks = cells <= BLOCK_MAX_CELLS
+        || (large_blocks && (BLOCK_FROM_CELLS..=BLOCK_UPTO_CELLS).contains(&cells));
     let blk = if blocks { BLOCK } else { 1 };
     let (bh, bw) = (h.div_ceil(blk), w.div_ceil(blk));
     let block_of = |i: usize, j: usize| ((i - r.0) / blk) * bw + (j - c.0) / blk;

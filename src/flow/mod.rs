@@ -90,7 +90,9 @@ pub struct Problem<'a> {
 /// Which linear solver.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Solver {
-    /// Cholesky when its factor fits in memory, multigrid otherwise.
+    /// Cholesky when its factor fits in memory (the symbolic analysis skipped when even a
+    /// lower bound of it does not), multigrid otherwise, and when the factor's answer fails
+    /// its checks on more unknowns than the cancellation-free elimination takes.
     Auto,
     /// Sparse Cholesky ([`direct`]), refined with double-double residuals.
     Cholesky,
