@@ -9,7 +9,7 @@
 //! # Ordering
 //!
 //! The fill-reducing order is approximate minimum degree (faer's AMD), over 2 × 2 blocks of
-//! cells ([`BLOCK`]) on pieces of up to a million cells (except 20,000 to 65,536), on
+//! cells ([`BLOCK`]) on pieces of up to a million cells (except 20,000 to 100,000), on
 //! pieces of the grid:
 //! the grid is cut in two by its middle row (or, without wrap and wider than tall, its
 //! middle column), each half cut again ([`SPLIT_DEPTH`] times, pieces of at least
@@ -49,13 +49,14 @@ const SPLIT_MIN: usize = 1 << 16;
 
 /// Side of the square blocks of cells the minimum-degree order is computed on, for pieces of
 /// at most [`BLOCK_MAX_CELLS`] cells and pieces of [`BLOCK_FROM_CELLS`] to
-/// [`BLOCK_UPTO_CELLS`] cells (cell by cell otherwise). faer's supernodal factorisation
+/// [`BLOCK_UPTO_CELLS`] cells (cell by cell otherwise; a grid below `2 SPLIT_MIN` cells is
+/// one piece). faer's supernodal factorisation
 /// spends its time per supernode more than per flop, and the minimum-degree step costs
 /// about in proportion to the nodes it orders: the order of 2 × 2 blocks, whose factor has
 /// 1.8–2.6× the entries of the cell-by-cell order, takes a quarter of the time to compute
 /// and its factor is no slower up to about a million cells a piece. On the contact gaps of
 /// the flow benchmarks (one thread) a whole flow takes 20–30 % less time at 97² to 129²,
-/// 36 % less at 513² and 18–38 % less at 1025² (two gaps); at 257² (pieces of 33,000
+/// 36 % less at 513² and 18–38 % less at 1025² (two gaps); at 257² (one piece of 66,049
 /// cells) it took 15 % more, and at 2049² (pieces of 2.1 million cells: 1.9–2.2× the
 /// entries, the numeric factor 1.2–2.7× slower) 23 % more (docs/flow.md).
 const BLOCK: usize = 2;
@@ -63,8 +64,9 @@ const BLOCK: usize = 2;
 /// Largest small piece (cells of its rectangle) ordered by [`BLOCK`]-sized blocks.
 const BLOCK_MAX_CELLS: usize = 20_000;
 
-/// Smallest large piece ordered by [`BLOCK`]-sized blocks.
-const BLOCK_FROM_CELLS: usize = 1 << 16;
+/// Smallest large piece ordered by [`BLOCK`]-sized blocks (above the 66,049 cells of a
+/// whole 257² grid, below the halves of 513², 131,328 cells).
+const BLOCK_FROM_CELLS: usize = 100_000;
 
 /// Largest large piece ordered by [`BLOCK`]-sized blocks.
 const BLOCK_UPTO_CELLS: usize = 1 << 20;
