@@ -257,13 +257,19 @@ def flow(
         max_iter: conjugate-gradient iterations allowed (default 20000).
         memory_limit: bytes allowed, a positive integer (default: what this process may
             still allocate, :func:`leakpath._memory.memory_limit`).
-        solver: ``"cholesky"`` (sparse Cholesky, refined with double-double residuals),
-            ``"multigrid"`` (conjugate gradients preconditioned by classical algebraic
-            multigrid, refined on exact residuals until the residual, the rate's error and
-            the Jacobi pressure change are below ``tol``; memory linear in the grid), or
-            ``"auto"`` (default: Cholesky whenever its factor, whose exact size is known
-            after the symbolic analysis, fits in ``memory_limit`` and the available memory;
-            multigrid otherwise, docs/flow.md).
+        solver: ``"cholesky"`` (sparse Cholesky; the answer's residuals are summed in
+            double-double arithmetic and it is kept when each rate's first-order error
+            ``ψ·(b_in − Aφ)``, ``φ·(b_out − Aψ)`` is at most 1e-12 of the rate, else refined
+            with the factor as two doubles per pressure, else solved by a cancellation-free
+            elimination up to 2^20 unknowns), ``"multigrid"`` (conjugate gradients
+            preconditioned by classical algebraic multigrid, refined on exact residuals
+            until the residual, the rate's error and the Jacobi pressure change are below
+            ``tol``; memory linear in the grid), or ``"auto"`` (default: Cholesky whenever
+            its factor, whose exact size is known after the symbolic analysis, fits in
+            ``memory_limit`` and the available memory, skipping the analysis when even a
+            lower bound of the factor (320 bytes per unknown) does not fit; multigrid
+            otherwise, and when the factor's answer fails its checks on more than 2^20
+            unknowns; docs/flow.md).
         gas: isothermal ideal gas instead of an incompressible liquid (module docstring);
             needs ``inlet_pressure`` and ``outlet_pressure`` (absolute, ``≥ 0``),
             ``gas_constant`` ``R_s`` (specific, e.g. 287.05 J/(kg K) for air) and

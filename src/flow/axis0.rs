@@ -130,11 +130,19 @@ pub(super) fn solve_axis0(
         None => None,
         Some(f) => {
             let trusted = f.ok().and_then(|mut f| {
-                let (x, psi, residual) = solve_direct(&mut f, &fine, &rhs, &b_out);
-                trusted(&fine, &rhs, &b_out, &x, &psi).then_some((x, psi, residual))
+                let a = solve_direct(&mut f, &fine, &rhs, &b_out);
+                if trusted(&rhs, &b_out, &a) {
+                    return Some(a);
+                }
+                let a = split_direct(&mut f, &fine, &rhs, &b_out, a);
+                trusted(&rhs, &b_out, &a).then_some(a)
             });
             match trusted {
-                Some(t) => Some(t),
+                Some(a) => {
+                    let residual = a.residual();
+                    lo = a.lo;
+                    Some((a.x, a.psi, residual))
+                }
                 None if opts.solver == Solver::Auto && n_unknowns > gth::MAX_UNKNOWNS => None,
                 None => {
                     let (x, psi, residual, split) = solve_gth(&fine, &rhs, &b_out, factor_room)?;

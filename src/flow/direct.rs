@@ -8,14 +8,21 @@
 //!
 //! # Ordering
 //!
-//! The fill-reducing order is approximate minimum degree (faer's AMD), on small pieces over
-//! 2 × 2 blocks of cells ([`BLOCK`]), on pieces of the grid:
+//! The fill-reducing order is approximate minimum degree (faer's AMD), over 2 × 2 blocks of
+//! cells ([`BLOCK`]) on pieces of up to a million cells (except 20,000 to 100,000), on
+//! pieces of the grid:
 //! the grid is cut in two by its middle row (or, without wrap and wider than tall, its
 //! middle column), each half cut again ([`SPLIT_DEPTH`] times, pieces of at least
 //! [`SPLIT_MIN`] cells); the pieces are ordered independently, in parallel, and the
 //! separators come last. A separator couples only the two pieces it divides, so the order
 //! does not depend on the thread count. The minimum-degree step is the costliest part of the
 //! analysis on large grids; this puts every core on it for a little more fill.
+//!
+//! A full nested dissection by grid rows and columns (pieces cut down to 64–16,384 cells,
+//! a wrapped grid first opened by its last column) orders in a fifth to a half of the
+//! time, but these gaps are not full grids: the minimum-degree order follows their
+//! channels and has half the fill (13.5 against 26–38 entries per unknown at 513², 24
+//! against 29–32 at 1025²), which the solves pay for (docs/flow.md).
 //!
 //! # Memory
 //!
@@ -41,21 +48,33 @@ const SPLIT_DEPTH: usize = 1;
 const SPLIT_MIN: usize = 1 << 16;
 
 /// Side of the square blocks of cells the minimum-degree order is computed on, for pieces of
-/// at most [`BLOCK_MAX_CELLS`] cells (cell by cell above). On small grids faer's supernodal
-/// factorisation spends its time per supernode more than per flop: the order of 2 × 2 blocks,
-/// whose factor has 2.5× the entries of the cell-by-cell order, takes a quarter of the time
-/// to compute and its factor is no slower, so a flow at 97² to 129² takes 20–30 % less time
-/// (spectral H = 0.9 gaps at 0–13 % contact, and the levels of RMD sweeps). From 161² on
-/// the extra entries cost more than the blocks save (measured at 161², 193², 225², 257²).
+/// at most [`BLOCK_MAX_CELLS`] cells and pieces of [`BLOCK_FROM_CELLS`] to
+/// [`BLOCK_UPTO_CELLS`] cells (cell by cell otherwise; a grid below `2 SPLIT_MIN` cells is
+/// one piece). faer's supernodal factorisation
+/// spends its time per supernode more than per flop, and the minimum-degree step costs
+/// about in proportion to the nodes it orders: the order of 2 × 2 blocks, whose factor has
+/// 1.8–2.6× the entries of the cell-by-cell order, takes a quarter of the time to compute
+/// and its factor is no slower up to about a million cells a piece. On the contact gaps of
+/// the flow benchmarks (one thread) a whole flow takes 20–30 % less time at 97² to 129²,
+/// 36 % less at 513² and 18–38 % less at 1025² (two gaps); at 257² (one piece of 66,049
+/// cells) it took 15 % more, and at 2049² (pieces of 2.1 million cells: 1.9–2.2× the
+/// entries, the numeric factor 1.2–2.7× slower) 23 % more (docs/flow.md).
 const BLOCK: usize = 2;
 
-/// Largest piece (cells of its rectangle) ordered by [`BLOCK`]-sized blocks.
+/// Largest small piece (cells of its rectangle) ordered by [`BLOCK`]-sized blocks.
 const BLOCK_MAX_CELLS: usize = 20_000;
+
+/// Smallest large piece ordered by [`BLOCK`]-sized blocks (above the 66,049 cells of a
+/// whole 257² grid, below the halves of 513², 131,328 cells).
+const BLOCK_FROM_CELLS: usize = 100_000;
+
+/// Largest large piece ordered by [`BLOCK`]-sized blocks.
+const BLOCK_UPTO_CELLS: usize = 1 << 20;
 
 /// Iterative-refinement steps at most per right-hand side.
 const REFINE: usize = 4;
 
-/// Refinement stops once the relative residual is at or below this.
+/// [`Factor::solve`] stops refining once the relative residual is at or below this.
 const REFINED: f64 = 1e-15;
 
 fn failed(what: impl std::fmt::Display) -> Error {
@@ -149,7 +168,7 @@ impl Factor {
                 )
                 .map_err(|e| failed(format!("{e:?}")))?;
         }
-        let solve_buf = MemBuffer::try_new(symbolic.solve_in_place_scratch::<f64>(1, par))
+        let solve_buf = MemBuffer::try_new(symbolic.solve_in_place_scratch::<f64>(2, par))
             .map_err(|_| failed("out of memory"))?;
         Ok(Factor {
             cells,
@@ -164,9 +183,14 @@ impl Factor {
         self.values.len()
     }
 
-    fn solve_cells(&mut self, b: &[f64], x: &mut [f64], add: bool) {
+    /// `x = A⁻¹ b` (or `x += A⁻¹ b` with `add`) on the active cells for each pair `(b, x)`
+    /// of `cols`, all columns in one pass over the factor.
+    fn solve_cells(&mut self, cols: &mut [(&[f64], &mut [f64])], add: bool) {
         let m = self.cells.len();
-        let mut sol = Mat::<f64>::from_fn(m, 1, |r, _| b[self.cells[r]]);
+        if m == 0 {
+            return;
+        }
+        let mut sol = Mat::<f64>::from_fn(m, cols.len(), |r, c| cols[c].0[self.cells[r]]);
         let llt = LltRef::<'_, usize, f64>::new(&self.symbolic, &self.values);
         llt.solve_in_place_with_conj(
             Conj::No,
@@ -174,30 +198,44 @@ impl Factor {
             Par::Seq,
             MemStack::new(&mut self.solve_buf),
         );
-        for (r, &k) in self.cells.iter().enumerate() {
-            if add {
-                x[k] += sol[(r, 0)];
-            } else {
-                x[k] = sol[(r, 0)];
+        for (c, (_, x)) in cols.iter_mut().enumerate() {
+            for (r, &k) in self.cells.iter().enumerate() {
+                if add {
+                    x[k] += sol[(r, c)];
+                } else {
+                    x[k] = sol[(r, c)];
+                }
             }
         }
     }
 
-    /// `A x = b` on the active cells (0 elsewhere), refined against `st` with residuals in
-    /// double-double arithmetic ([`Stencil::residual_compensated`]) until the relative
-    /// residual is at most [`REFINED`] or [`REFINE`] steps were taken. Returns the relative
-    /// residual `‖b − A x‖₂ / ‖b‖₂`.
+    /// `A x = b` for the two right-hand sides of a flow (inlet and outlet), from the factor
+    /// alone: `x1 = A⁻¹ b1`, `x2 = A⁻¹ b2` on the active cells, 0 elsewhere.
+    pub fn solve_pair(&mut self, b1: &[f64], b2: &[f64], x1: &mut [f64], x2: &mut [f64]) {
+        x1.iter_mut().for_each(|v| *v = 0.0);
+        x2.iter_mut().for_each(|v| *v = 0.0);
+        self.solve_cells(&mut [(b1, x1), (b2, x2)], false);
+    }
+
+    /// `x1 += A⁻¹ r1`, `x2 += A⁻¹ r2` on the active cells: one refinement step of both.
+    pub fn correct_pair(&mut self, r1: &[f64], r2: &[f64], x1: &mut [f64], x2: &mut [f64]) {
+        self.solve_cells(&mut [(r1, x1), (r2, x2)], true);
+    }
+
+    /// `A x = b` on the active cells (0 elsewhere), refined with double-double residuals
+    /// ([`Stencil::residual_compensated`]) until the relative residual is at most
+    /// [`REFINED`], a step no longer halves it (the factor's error is then as large as the
+    /// correction: a condition number near 1/ε) or [`REFINE`] steps were taken; a step that
+    /// made it worse is undone.
+    /// Returns the relative residual `‖b − A x‖₂ / ‖b‖₂`.
     pub fn solve(&mut self, st: &Stencil, b: &[f64], x: &mut [f64]) -> f64 {
         x.iter_mut().for_each(|v| *v = 0.0);
         let bnorm = cg::dot(b, b).sqrt();
-        if bnorm == 0.0 || self.cells.is_empty() {
+        if bnorm == 0.0 {
             return 0.0;
         }
-        self.solve_cells(b, x, false);
+        self.solve_cells(&mut [(b, &mut *x)], false);
         let mut res = vec![0.0; b.len()];
-        // Stop at REFINED, after REFINE steps, or when a step no longer halves the residual
-        // (the factor's error is then as large as the correction: a condition number near
-        // 1/ε); a step that made it worse is undone.
         let mut best = f64::INFINITY;
         let mut best_x = x.to_vec();
         for step in 0..=REFINE {
@@ -213,7 +251,7 @@ impl Factor {
                 break;
             }
             best_x.copy_from_slice(x);
-            self.solve_cells(&res, x, true);
+            self.solve_cells(&mut [(&res, &mut *x)], true);
         }
         best
     }
@@ -255,10 +293,35 @@ fn lower_csc(st: &Stencil, index: &[usize], cells: &[usize]) -> (Vec<usize>, Vec
 }
 
 /// Elimination order (new position → unknown) of the unknowns `index` (grid cell → unknown,
-/// `usize::MAX` for none); see the module docs.
+/// `usize::MAX` for none) for the factor; see the module docs.
 pub(super) fn ordering(st: &Stencil, index: &[usize], m: usize) -> Vec<usize> {
     let mut out = Vec::with_capacity(m);
-    region_order(st, index, (0, st.ny), (0, st.nx), SPLIT_DEPTH, &mut out);
+    region_order(
+        st,
+        index,
+        (0, st.ny),
+        (0, st.nx),
+        SPLIT_DEPTH,
+        true,
+        &mut out,
+    );
+    out
+}
+
+/// [`ordering`] with blocks on the small pieces only (at most [`BLOCK_MAX_CELLS`] cells), for
+/// the cancellation-free elimination ([`super::gth`]), whose cost grows with the fill more
+/// than the supernodal factor's.
+pub(super) fn elimination_ordering(st: &Stencil, index: &[usize], m: usize) -> Vec<usize> {
+    let mut out = Vec::with_capacity(m);
+    region_order(
+        st,
+        index,
+        (0, st.ny),
+        (0, st.nx),
+        SPLIT_DEPTH,
+        false,
+        &mut out,
+    );
     out
 }
 
@@ -268,6 +331,7 @@ fn region_order(
     r: (usize, usize),
     c: (usize, usize),
     depth: usize,
+    large_blocks: bool,
     out: &mut Vec<usize>,
 ) {
     let (h, w) = (r.1 - r.0, c.1 - c.0);
@@ -278,7 +342,7 @@ fn region_order(
     let by_rows = (st.periodic && c == (0, st.nx)) || h >= w;
     let long = if by_rows { h } else { w };
     if depth == 0 || h * w < 2 * SPLIT_MIN || long < 3 {
-        amd_region(st, index, r, c, out);
+        amd_region(st, index, r, c, large_blocks, out);
         return;
     }
     let (mut a, mut b) = (Vec::new(), Vec::new());
@@ -286,15 +350,35 @@ fn region_order(
     let sep: Vec<usize> = if by_rows {
         let mid = r.0 + h / 2;
         rayon::join(
-            || region_order(st, index, (r.0, mid), c, depth - 1, &mut a),
-            || region_order(st, index, (mid + 1, r.1), c, depth - 1, &mut b),
+            || region_order(st, index, (r.0, mid), c, depth - 1, large_blocks, &mut a),
+            || {
+                region_order(
+                    st,
+                    index,
+                    (mid + 1, r.1),
+                    c,
+                    depth - 1,
+                    large_blocks,
+                    &mut b,
+                )
+            },
         );
         (c.0..c.1).map(|j| index[mid * nx + j]).collect()
     } else {
         let mid = c.0 + w / 2;
         rayon::join(
-            || region_order(st, index, r, (c.0, mid), depth - 1, &mut a),
-            || region_order(st, index, r, (mid + 1, c.1), depth - 1, &mut b),
+            || region_order(st, index, r, (c.0, mid), depth - 1, large_blocks, &mut a),
+            || {
+                region_order(
+                    st,
+                    index,
+                    r,
+                    (mid + 1, c.1),
+                    depth - 1,
+                    large_blocks,
+                    &mut b,
+                )
+            },
         );
         (r.0..r.1).map(|i| index[i * nx + mid]).collect()
     };
@@ -305,7 +389,8 @@ fn region_order(
 
 /// Approximate-minimum-degree order of the unknowns in one rectangle of the grid (faces to
 /// cells outside it do not count: those cells are separators, eliminated later), computed on
-/// square blocks of cells ([`BLOCK`] on small rectangles, single cells otherwise): two blocks
+/// square blocks of cells ([`BLOCK`] on the rectangles listed there, the large ones only with
+/// `large_blocks`; single cells otherwise): two blocks
 /// are neighbours when a face with positive conductance joins them, and each block's
 /// unknowns follow one another, row-major, at the block's place in the order.
 fn amd_region(
@@ -313,12 +398,16 @@ fn amd_region(
     index: &[usize],
     r: (usize, usize),
     c: (usize, usize),
+    large_blocks: bool,
     out: &mut Vec<usize>,
 ) {
     let nx = st.nx;
     let (h, w) = (r.1 - r.0, c.1 - c.0);
     let wrap = st.periodic && c == (0, nx) && nx > 2;
-    let blk = if h * w <= BLOCK_MAX_CELLS { BLOCK } else { 1 };
+    let cells = h * w;
+    let blocks = cells <= BLOCK_MAX_CELLS
+        || (large_blocks && (BLOCK_FROM_CELLS..=BLOCK_UPTO_CELLS).contains(&cells));
+    let blk = if blocks { BLOCK } else { 1 };
     let (bh, bw) = (h.div_ceil(blk), w.div_ceil(blk));
     let block_of = |i: usize, j: usize| ((i - r.0) / blk) * bw + (j - c.0) / blk;
     // Blocks holding unknowns, numbered in raster order.

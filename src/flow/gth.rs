@@ -17,7 +17,8 @@
 //! terms too, so every pressure, and the flow rate `b_out · φ`, has a relative error of a
 //! few `n ε` however widely the conductances spread.
 //!
-//! The elimination order is the Cholesky solver's ([`super::direct::ordering`]).
+//! The elimination order is the Cholesky solver's without its blocks on large pieces
+//! ([`super::direct::elimination_ordering`]).
 
 use super::assemble::Stencil;
 use super::direct;
@@ -64,7 +65,7 @@ impl Elimination {
                 what: format!("the cancellation-free elimination of {m} flow unknowns"),
             });
         }
-        let order = direct::ordering(st, &index, m);
+        let order = direct::elimination_ordering(st, &index, m);
         // Position of each unknown in the order.
         let mut pos = vec![0u32; m];
         for (p, &u) in order.iter().enumerate() {

@@ -55,7 +55,8 @@ use multigrid::Multigrid;
 
 use axis0::solve_axis0;
 use paths::{
-    available_memory, cholesky_estimate, solve_direct, solve_gth, solve_multigrid, trusted,
+    available_memory, cholesky_estimate, solve_direct, solve_gth, solve_multigrid, split_direct,
+    trusted,
 };
 pub use paths::{CONSERVATION_MAX, FLUX_AGREEMENT};
 
@@ -89,7 +90,9 @@ pub struct Problem<'a> {
 /// Which linear solver.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Solver {
-    /// Cholesky when its factor fits in memory, multigrid otherwise.
+    /// Cholesky when its factor fits in memory (the symbolic analysis skipped when even a
+    /// lower bound of it does not), multigrid otherwise, and when the factor's answer fails
+    /// its checks on more unknowns than the cancellation-free elimination takes.
     Auto,
     /// Sparse Cholesky ([`direct`]), refined with double-double residuals.
     Cholesky,

@@ -17,77 +17,137 @@ pub(super) fn rates_agree(q_in: f64, q_out: f64) -> bool {
     (q_in - q_out).abs() <= FLUX_AGREEMENT * q_out.abs()
 }
 
-/// `φ` from the factor, and `ψ = 1 − φ`: taken from `φ` when the inlet rate
-/// `Σ b_in (1 − φ)` keeps its digits (the cancellation bound `4 ε Σ b_in` is below `10⁻¹³` of
-/// it) and agrees with the outlet rate `b_out · φ` to [`DIRECT_AGREEMENT`]; else solved for
-/// with the same factor (the flow many decades below the conductances, near the percolation
-/// threshold). The larger relative residual of the solves.
+/// A factored solve: `φ` and `ψ`, their exact residuals `b_in − A φ` and `b_out − A ψ`
+/// (summed in double-double arithmetic) and relative residuals, and the low parts of `φ`
+/// and `ψ` when they are carried in two doubles (empty otherwise).
+pub(super) struct DirectAnswer {
+    pub(super) x: Vec<f64>,
+    pub(super) psi: Vec<f64>,
+    r_x: Vec<f64>,
+    r_psi: Vec<f64>,
+    rel_x: f64,
+    rel_psi: f64,
+    pub(super) lo: (Vec<f64>, Vec<f64>),
+}
+
+impl DirectAnswer {
+    /// The larger relative residual of `φ` and `ψ`.
+    pub(super) fn residual(&self) -> f64 {
+        self.rel_x.max(self.rel_psi)
+    }
+}
+
+/// `‖r‖₂ / ‖b‖₂`.
+fn relative(r: &[f64], b: &[f64]) -> f64 {
+    let bn = cg::dot(b, b).sqrt();
+    if bn == 0.0 {
+        0.0
+    } else {
+        cg::dot(r, r).sqrt() / bn
+    }
+}
+
+/// `φ` (inlet at 1) and `ψ` (outlet at 1) from the factor, both columns in one pass, with
+/// their exact residuals; [`split_direct`] refines them when they fail [`trusted`].
 pub(super) fn solve_direct(
     f: &mut direct::Factor,
     st: &assemble::Stencil,
     b_in: &[f64],
     b_out: &[f64],
-) -> (Vec<f64>, Vec<f64>, f64) {
+) -> DirectAnswer {
     let n = b_in.len();
-    let mut x = vec![0.0; n];
-    let mut residual = f.solve(st, b_in, &mut x);
-    let q_out = cg::dot(b_out, &x);
-    let q_in = rate_error(&x, b_in);
-    let scale = cg::sum(b_in);
-    let kept = 4.0 * f64::EPSILON * scale <= 1e-13 * q_in.abs()
-        && (q_in - q_out).abs() <= DIRECT_AGREEMENT * q_out.abs();
-    let psi = if kept {
-        x.par_iter()
-            .zip(st.active.par_iter())
-            .map(|(&v, &on)| if on { 1.0 - v } else { 0.0 })
-            .collect()
-    } else {
-        let mut psi = vec![0.0; n];
-        residual = residual.max(f.solve(st, b_out, &mut psi));
-        psi
-    };
-    (x, psi, residual)
+    let (mut x, mut psi) = (vec![0.0; n], vec![0.0; n]);
+    f.solve_pair(b_in, b_out, &mut x, &mut psi);
+    let (mut r_x, mut r_psi) = (vec![0.0; n], vec![0.0; n]);
+    st.residual_compensated(&x, b_in, &mut r_x);
+    st.residual_compensated(&psi, b_out, &mut r_psi);
+    DirectAnswer {
+        rel_x: relative(&r_x, b_in),
+        rel_psi: relative(&r_psi, b_out),
+        x,
+        psi,
+        r_x,
+        r_psi,
+        lo: (Vec::new(), Vec::new()),
+    }
 }
 
-/// Inlet and outlet rates of a factored solve that agree to this need no reversed solve.
-pub(super) const DIRECT_AGREEMENT: f64 = 1e-12;
+/// Refinement steps at most of the low parts of a factored answer.
+pub(super) const DIRECT_SPLIT: usize = 4;
+
+/// The factored answer `a` carried in two doubles, `φ = hi + lo` and `ψ = hi + lo`: the low
+/// parts refined together with the factor against residuals of `hi + lo` summed exactly
+/// ([`assemble::Stencil::residual_split`]) until [`trusted`], until a step halves neither
+/// relative residual (the factor's error is then as large as the correction: a condition
+/// number near `1/ε`), or [`DIRECT_SPLIT`] steps. Refinement in one double would stop at the
+/// rounding of `φ` and `ψ`, which alone can leave a residual whose first-order rate error
+/// `ψ · r` exceeds [`DIRECT_TRUST`] of a rate many decades below the conductances (the
+/// 2049² contact gap of the benchmarks: 1.8e-12); the pair holds those digits.
+pub(super) fn split_direct(
+    f: &mut direct::Factor,
+    st: &assemble::Stencil,
+    b_in: &[f64],
+    b_out: &[f64],
+    mut a: DirectAnswer,
+) -> DirectAnswer {
+    let n = b_in.len();
+    a.lo = (vec![0.0; n], vec![0.0; n]);
+    for _ in 0..DIRECT_SPLIT {
+        let before = (a.rel_x, a.rel_psi);
+        f.correct_pair(&a.r_x, &a.r_psi, &mut a.lo.0, &mut a.lo.1);
+        st.residual_split(&a.x, &a.lo.0, b_in, &mut a.r_x);
+        st.residual_split(&a.psi, &a.lo.1, b_out, &mut a.r_psi);
+        a.rel_x = relative(&a.r_x, b_in);
+        a.rel_psi = relative(&a.r_psi, b_out);
+        let halved = a.rel_x <= 0.5 * before.0 || a.rel_psi <= 0.5 * before.1;
+        if trusted(b_in, b_out, &a) || !halved {
+            break;
+        }
+    }
+    a
+}
 
 /// Largest first-order error of a flow rate, relative to the rate, at which the factor's
 /// answer is kept.
 pub(super) const DIRECT_TRUST: f64 = 1e-12;
 
-/// Whether the refined factor's `φ` (inlet at 1) and `ψ` (outlet at 1) can be returned: both
-/// rates positive and finite, every pressure in `[0, 1]` (the maximum principle) to
-/// round-off, the first-order errors of the rates from the exact residuals,
-/// `ψ · (b_in − A φ)` and `φ · (b_out − A ψ)`, at most [`DIRECT_TRUST`] of them, and the
-/// rates agreeing to [`FLUX_AGREEMENT`]. The factor of the rounded matrix fails this when a
-/// region is joined to the rest only through faces below `ε` of its own (conductances
-/// spanning some sixteen decades or more).
-pub(super) fn trusted(
-    st: &assemble::Stencil,
-    b_in: &[f64],
-    b_out: &[f64],
-    x: &[f64],
-    psi: &[f64],
-) -> bool {
-    let (q_out, q_in) = (cg::dot(b_out, x), cg::dot(b_in, psi));
+/// Whether the refined factor's `φ` (inlet at 1) and `ψ` (outlet at 1), with their low parts
+/// when split, can be returned: both rates positive and finite, every pressure in `[0, 1]`
+/// (the maximum principle) to round-off, the first-order errors of the rates from the exact
+/// residuals, `ψ · (b_in − A φ)` and `φ · (b_out − A ψ)`, at most [`DIRECT_TRUST`] of them,
+/// and the rates agreeing to [`FLUX_AGREEMENT`]. The factor of the rounded matrix fails this
+/// when a region is joined to the rest only through faces below `ε` of its own
+/// (conductances spanning some sixteen decades or more).
+pub(super) fn trusted(b_in: &[f64], b_out: &[f64], a: &DirectAnswer) -> bool {
+    let (x, psi) = (&a.x, &a.psi);
+    let (xlo, psilo) = (&a.lo.0, &a.lo.1);
+    let split = !xlo.is_empty();
+    let rate = |w: &[f64], hi: &[f64], lo: &[f64]| {
+        if split {
+            cg::dot(w, hi) + cg::dot(w, lo)
+        } else {
+            cg::dot(w, hi)
+        }
+    };
+    let (q_out, q_in) = (rate(b_out, x, xlo), rate(b_in, psi, psilo));
     if !(q_out.is_finite() && q_in.is_finite() && q_out > 0.0 && q_in > 0.0) {
         return false;
     }
     if !rates_agree(q_in, q_out) {
         return false;
     }
-    let in_range = |v: &[f64]| v.par_iter().all(|&t| (-1e-12..=1.0 + 1e-12).contains(&t));
-    if !(in_range(x) && in_range(psi)) {
+    let in_range = |v: &[f64], lo: &[f64]| {
+        v.par_iter().enumerate().all(|(k, &t)| {
+            let t = if split { t + lo[k] } else { t };
+            (-1e-12..=1.0 + 1e-12).contains(&t)
+        })
+    };
+    if !(in_range(x, xlo) && in_range(psi, psilo)) {
         return false;
     }
-    let mut r = vec![0.0; x.len()];
-    st.residual_compensated(x, b_in, &mut r);
-    if cg::dot(psi, &r).abs() > DIRECT_TRUST * q_out {
-        return false;
-    }
-    st.residual_compensated(psi, b_out, &mut r);
-    cg::dot(x, &r).abs() <= DIRECT_TRUST * q_in
+    let e_out = rate(&a.r_x, psi, psilo);
+    let e_in = rate(&a.r_psi, x, xlo);
+    e_out.abs() <= DIRECT_TRUST * q_out && e_in.abs() <= DIRECT_TRUST * q_in
 }
 
 /// `φ`, `ψ`, the larger relative residual, and the low parts of `φ` and `ψ`.

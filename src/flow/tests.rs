@@ -931,7 +931,7 @@ fn elimination_matches_the_factor_on_ordinary_gaps() {
         let mut x = vec![0.0; ny * nx];
         elim.solve(b, &mut x);
         let mut y = vec![0.0; ny * nx];
-        f.solve(&st, b, &mut y);
+        let _ = f.solve(&st, b, &mut y);
         for k in 0..ny * nx {
             if st.active[k] {
                 assert!((x[k] - y[k]).abs() < 1e-13, "{k}: {} vs {}", x[k], y[k]);
@@ -983,4 +983,67 @@ fn given_labels_give_the_same_solution() {
             assert!(format!("{err}").contains("labels"), "{err}");
         }
     }
+}
+
+/// The factored answer carried in two doubles (`split_direct`) against the cancellation-free
+/// elimination (`gth`, a second solver whose rates are sums of positive terms) on fields near
+/// the percolation threshold whose `g³` spans 6 to 12 decades: the same rates to 1e-13, and
+/// the first-order rate errors far below those of the double answer.
+#[test]
+fn split_refinement_matches_the_elimination_near_threshold() {
+    let mut ran = 0;
+    for (seed, decades) in [(3u64, 6.0), (5, 9.0), (8, 12.0)] {
+        let n = 48;
+        let gap = threshold_gap(seed, n * n, 0.62, decades);
+        let c: Vec<f64> = gap.iter().map(|g| g * g * g).collect();
+        let (st0, _) = assemble::fine_stencil(&c, n, n, true);
+        // Unknowns on the spanning clusters only, as the solve has them.
+        let open: Vec<bool> = c.iter().map(|&v| v > 0.0).collect();
+        let per = Periodic {
+            axis0: false,
+            axis1: true,
+        };
+        let (labels, k) = clusters::label(&open, n, n, Connectivity::Four, per).unwrap();
+        let mut touch = vec![0u8; k + 1];
+        for j in 0..n {
+            touch[labels[j] as usize] |= 1;
+            touch[labels[(n - 1) * n + j] as usize] |= 2;
+        }
+        touch[0] = 0;
+        let cs: Vec<f64> = c
+            .iter()
+            .zip(&labels)
+            .map(|(&v, &l)| if touch[l as usize] == 3 { v } else { 0.0 })
+            .collect();
+        drop(st0);
+        if cs.iter().all(|&v| v == 0.0) {
+            continue;
+        }
+        let (st, b_in) = assemble::fine_stencil(&cs, n, n, true);
+        let b_out: Vec<f64> = (0..n * n)
+            .map(|k| if k >= (n - 1) * n { 2.0 * cs[k] } else { 0.0 })
+            .collect();
+        let (gx, gpsi, _, (gxlo, gpsilo)) = paths::solve_gth(&st, &b_in, &b_out, None).unwrap();
+        let q_ref = cg::dot(&b_out, &gx) + cg::dot(&b_out, &gxlo);
+        let q_ref_in = cg::dot(&b_in, &gpsi) + cg::dot(&b_in, &gpsilo);
+        assert!(rel(q_ref, q_ref_in) < 1e-13);
+        let mut f = direct::Factor::new(&st, None).unwrap();
+        let a = paths::solve_direct(&mut f, &st, &b_in, &b_out);
+        let a = paths::split_direct(&mut f, &st, &b_in, &b_out, a);
+        assert!(paths::trusted(&b_in, &b_out, &a), "seed {seed}");
+        assert!(
+            a.residual() < 1e-16,
+            "seed {seed}: residual {:e}",
+            a.residual()
+        );
+        let q = cg::dot(&b_out, &a.x) + cg::dot(&b_out, &a.lo.0);
+        let q_in = cg::dot(&b_in, &a.psi) + cg::dot(&b_in, &a.lo.1);
+        assert!(rel(q, q_ref) < 1e-13, "seed {seed}: {q:e} vs {q_ref:e}");
+        assert!(
+            rel(q_in, q_ref) < 1e-13,
+            "seed {seed}: {q_in:e} vs {q_ref:e}"
+        );
+        ran += 1;
+    }
+    assert_eq!(ran, 3);
 }
