@@ -339,7 +339,7 @@ def solve_reynolds_flow(
     these open cells with connectivity 4 and the flow's wrap, used instead of labelling
     again (``ValueError`` naming ``labels`` otherwise). ``axis``: 0 or 1. ``solver``:
     "cholesky" (sparse Cholesky, refined with double-double residuals), "multigrid"
-    (conjugate gradients with an aggregation multigrid preconditioner to
+    (conjugate gradients with a classical (Ruge–Stüben) algebraic multigrid preconditioner to
     ``‖b − Ax‖/‖b‖ ≤ tol`` and ``|Q_in − Q_out| ≤ tol·|Q_out|`` unless round-off stalls it
     first) or "auto" (Cholesky whenever its factor fits in
     ``memory_limit`` and the available memory, multigrid otherwise). Returns a
