@@ -248,9 +248,18 @@ const SAFEGUARD: f64 = 1e3;
 /// 1e-8): without chord steps 52/130/212 fine products in 34/78/122 iterations; with
 /// 0.3 % 47/113/177 in 42/99/156; 0.5 % 47/122/156 in 42/102/124; 1 % 45/106/154 in
 /// 39/83/112; 3 % 41/118/161 in 36/88/109. A lower fraction means fewer products per
-/// iteration but more (steepest-descent) iterations; 0.5 % keeps the whole solve time within
-/// a few per cent of the best of these.
-pub const CHORD_FRACTION: f64 = 0.005;
+/// iteration but more (steepest-descent) iterations; 0.5 % kept the whole solve time within
+/// a few per cent of the best of these while any `I_ol` entry reset the conjugate direction.
+/// Since small entries keep it ([`OL_KEEP_FRACTION`]) the regular steps converge faster and
+/// 2 % pays: RMD D = 2.2, tol 1e-8, `Δ` in units of the height range, products (fine +
+/// coarse share) 0.5 % → 2 %, displacement / load control at the same contact state: free
+/// 1025² `Δ` = 0.1/0.3/0.6 h_s 36.4/74.9/106.5 → 34.4/66.9/89.5 and 32.1/53.6/78.8 →
+/// 32.1/53.6/68.8; free 2049² `Δ` = 0.3/0.6 h_s 101.9/146.4 → 92.9/150.4 and 80.7/99.8 →
+/// 74.7/102.8; periodic 1025² `Δ` = 0.1/0.3/0.45 h_s 34.4/84.4/110.2 → 33.4/75.4/96.2 and
+/// 33.3/77.3/107.9 → 34.3/71.3/85.9; periodic 2049² `Δ` = 0.3/0.45 h_s 105.1/136.3 →
+/// 100.1/131.3 and 122.9/150.8 → 119.9/129.8 (`benchmarks/results/contact_scale.md`). The
+/// preconditioner's pairs fall with the iterations.
+pub const CHORD_FRACTION: f64 = 0.02;
 
 /// The chord's trial length `τ₀` grows by this factor after a step that used the whole chord
 /// (`s = 1`) and shrinks to `max(s, CHORD_SHRINK_MIN) τ₀` otherwise.
