@@ -162,8 +162,9 @@
 //! restricted to `I_c`, and the restriction does not commute with the transform (updating
 //! `M χ g` by `−τ M χ C t` needs the transform of `χ C t`, a second pair anyway). Its pairs are
 //! counted apart ([`Solution::preconditioner_products`]); at 2049², free, `Δ = 0.3 h_s` (RMD
-//! D = 2.2, tol 1e-8) 89 pairs on the 2160² grid, about 25 products of the 4096² padded grid
-//! by transform size, next to 102 products (`benchmarks/results/contact_scale.md`).
+//! D = 2.2, tol 1e-8) 71 pairs on the 2160² grid (73.3 with the coarse levels' share), about
+//! 20 products of the 4096² padded grid by transform size, next to 92.9 products
+//! (`benchmarks/results/contact_scale.md`).
 //!
 //! # Convergence
 //!
@@ -277,12 +278,14 @@ fn wholesale(changed: usize, n_c: usize, sparse_max: usize) -> bool {
 /// solution a few boundary points leave by truncation and re-enter through `I_ol` in almost
 /// every step, most of all under load control, whose `Δ` moves every gap a little each step:
 /// with the paper's rule the iteration there is a (preconditioned) steepest descent that
-/// zig-zags at a rate of about 0.9 per step. Measured (RMD D = 2.2, free, tol 1e-8, `Δ` in
-/// units of the height range, products fine + coarse), paper's rule → this rule (any fraction
-/// from 0.1 % to 100 % gave the same counts within 1 product): 1025² `Δ` = 0.3/0.6 h_s
-/// displacement 77.9 → 74.9, 108.5 → 106.5; load at the same contact state `Δ` = 0.1/0.6 h_s
-/// 35.1 → 32.1, 145.8 → 78.8; 2049² `Δ` = 0.3 h_s displacement 115.9 → 101.9, load
-/// 143.7 → 80.7. Every step is still checked for descent (`Σ g t > 0`, else steepest).
+/// zig-zags at a rate of about 0.9 per step. Measured with chord steps above 0.5 % of the
+/// contact set changing (before [`CHORD_FRACTION`] became 2 %), RMD D = 2.2, free, tol
+/// 1e-8, `Δ` in units of the height range, products fine + coarse, paper's rule → this rule:
+/// 1025² `Δ` = 0.3/0.6 h_s displacement 77.9 → 74.9, 108.5 → 106.5; load at the same
+/// contact state `Δ` = 0.1/0.6 h_s 35.1 → 32.1, 145.8 → 78.8; 2049² `Δ` = 0.3 h_s
+/// displacement 115.9 → 101.9, load 143.7 → 80.7. A fraction of 100 % gave the counts of
+/// 1 % at 1025²; 0.1 % gave counts within ±1 product at 1025² and 104.9 / 88.7 at 2049².
+/// Every step is still checked for descent (`Σ g t > 0`, else steepest).
 pub const OL_KEEP_FRACTION: f64 = 0.01;
 
 /// Whether a step with `n_ol` entries through `I_ol` into a contact set of `n_c` points keeps
