@@ -1,6 +1,7 @@
 """Large-grid elastic contact: displacement vs load control, FFT products, time and memory.
 
-Surface: ``leakpath.rmd(m, 2.2, seed=0)`` on ``(2^m + 1)²`` nodes, free boundary, Polonsky–Keer
+Surface: ``leakpath.rmd(m, 2.2, seed=0)`` on ``(2^m + 1)²`` nodes, free boundary (``--boundary
+periodic`` for the periodic one), Polonsky–Keer
 (``solver="polonsky-keer"``, preconditioned, coarse start, chord steps: the defaults) at KKT
 tolerance ``--tol`` (default 1e-8, relative to the height range). For each size and each
 approach ``Δ = f · h_s`` (``f`` from ``--deltas``; ``h_s`` from ``--hs``: ``range``, the
@@ -15,7 +16,12 @@ Every (size, Δ, control) runs in a fresh Python process (its peak RSS is that s
 surface and the problem); the time is the median of ``--repeats`` solves on one problem
 (the problem's kernel and operator are built once, outside the timing). FFT products are
 counted in products of the padded fine grid: ``fft_products`` of the fine solve plus the coarse
-levels' ``fft_products_fine_equivalent`` (``Σ products · N_level / N``).
+levels' ``fft_products_fine_equivalent`` (``Σ products · N_level / N``). The preconditioner's
+FFT pairs (on the unpadded grid rounded up to a 2,3,5-smooth size ``P``) are counted apart:
+``preconditioner_products`` (fine + coarse levels' fine equivalent) and their share of a fine
+product by transform size, ``pre_fine_eq = preconditioner_products · P_y P_x / (F_y F_x)``
+(``F`` the fine product's FFT grid: ``2n − 2`` per side for the free boundary, ``n`` for the
+periodic one), so that ``products + pre_fine_eq`` counts every FFT pair of the solve.
 
 Run: ``python benchmarks/contact_scale_bench.py --sizes 1025 2049 --deltas 0.1 0.3 0.6
 --repeats 3 [--out benchmarks/results/contact_scale_after.json]``. Prints one row per
@@ -37,8 +43,28 @@ import time
 import numpy as np
 
 
+def smooth_size(n: int) -> int:
+    """Smallest 2,3,5-smooth integer ≥ n (the preconditioner's FFT size)."""
+    m = n
+    while True:
+        k = m
+        for f in (2, 3, 5):
+            while k % f == 0:
+                k //= f
+        if k == 1:
+            return m
+        m += 1
+
+
 def worker(
-    n: int, frac: float, control: str, pbar: float | None, repeats: int, tol: float, hs_kind: str
+    n: int,
+    frac: float,
+    control: str,
+    pbar: float | None,
+    repeats: int,
+    tol: float,
+    hs_kind: str,
+    boundary: str = "free",
 ) -> dict:
     import leakpath
     from leakpath import _core
@@ -50,7 +76,7 @@ def worker(
         hs = float(np.sqrt(((h - h.mean()) ** 2).mean()))
     else:
         hs = float(h.max() - h.min())
-    prob = _core.ContactProblem(h, s.dx, 1.0, "free")
+    prob = _core.ContactProblem(h, s.dx, 1.0, boundary)
     times = []
     out = None
     for _ in range(repeats):
@@ -62,8 +88,11 @@ def worker(
         times.append(time.perf_counter() - t0)
     assert out is not None
     rss_kib = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    fft_side = 2 * n - 2 if boundary == "free" else n
+    pre_total = out.preconditioner_products + out.coarse.preconditioner_products_fine_equivalent
     return {
         "size": n,
+        "boundary": boundary,
         "delta_over_hs": frac,
         "hs": hs_kind,
         "control": control,
@@ -75,6 +104,8 @@ def worker(
         "coarse_fft_products_fine_eq": out.coarse.fft_products_fine_equivalent,
         "products_fine_total": out.fft_products + out.coarse.fft_products_fine_equivalent,
         "preconditioner_products": out.preconditioner_products,
+        "preconditioner_products_total": pre_total,
+        "pre_fine_eq": pre_total * smooth_size(n) ** 2 / fft_side**2,
         "contact_fraction": out.contact_points / h.size,
         "mean_pressure": out.mean_pressure,
         "approach_over_hs": out.approach / hs,
@@ -101,7 +132,7 @@ def run_one(args, n: int, frac: float, control: str, pbar: float | None) -> dict
         sys.executable,
         __file__,
         "--worker",
-        json.dumps([n, frac, control, pbar, args.repeats, args.tol, args.hs]),
+        json.dumps([n, frac, control, pbar, args.repeats, args.tol, args.hs, args.boundary]),
     ]
     res = subprocess.run(cmd, capture_output=True, text=True, check=False)
     if res.returncode != 0:
@@ -116,6 +147,7 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--tol", type=float, default=1e-8)
     ap.add_argument("--hs", choices=["range", "rms"], default="range")
+    ap.add_argument("--boundary", choices=["free", "periodic"], default="free")
     ap.add_argument(
         "--controls", nargs="+", default=["displacement", "load"], choices=["displacement", "load"]
     )
@@ -123,13 +155,13 @@ def main() -> None:
     ap.add_argument("--worker", type=str, default=None, help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.worker is not None:
-        n, frac, control, pbar, repeats, tol, hs_kind = json.loads(args.worker)
-        print(json.dumps(worker(n, frac, control, pbar, repeats, tol, hs_kind)))
+        print(json.dumps(worker(*json.loads(args.worker))))
         return
-    print(f"# {machine()}; h_s = {args.hs}", flush=True)
+    print(f"# {machine()}; h_s = {args.hs}; boundary = {args.boundary}", flush=True)
     print(
         "# size | Δ/h_s | control | s (median) | iterations (chord) | products fine + coarse "
-        "= total [padded fine grid] | contact fraction | peak RSS [GiB]",
+        "= total [fine product FFT grid] | preconditioner pairs (fine-product equivalent) "
+        "| contact fraction | peak RSS [GiB]",
         flush=True,
     )
     for n in args.sizes:
@@ -150,7 +182,9 @@ def main() -> None:
                         f"{n} | {frac} | {control} | {row['seconds_median']:.2f} s | "
                         f"{row['iterations']} ({row['chord_steps']}) | {row['fft_products']} + "
                         f"{row['coarse_fft_products_fine_eq']:.1f} = "
-                        f"{row['products_fine_total']:.1f} | {row['contact_fraction']:.4f} | "
+                        f"{row['products_fine_total']:.1f} | "
+                        f"{row['preconditioner_products_total']:.1f} ({row['pre_fine_eq']:.1f}) | "
+                        f"{row['contact_fraction']:.4f} | "
                         f"{row['peak_rss_gib']:.2f}",
                         flush=True,
                     )

@@ -373,9 +373,11 @@ pub(super) fn run(
         }
         let up = w.update(tau, tau_ol, mode);
         it += 1;
-        // The paper's rule. After a steepest step on W, δ = 1 continues CG from that step
-        // (G_old = Σ_W g²), which is exact when the set did not change.
-        cg = up.n_ol == 0;
+        // The paper resets δ = 0 on any I_ol entry; here only entries of more than
+        // OL_KEEP_FRACTION of the contact set reset it (see there). After a steepest step on W,
+        // δ = 1 continues CG from that step (G_old = Σ_W g²), which is exact when the set did
+        // not change.
+        cg = keeps_conjugacy(up.n_ol, up.n_c);
         // Bring u (displacement control: g) up to date with p. A linear step is already done
         // by the update pass; a few non-linear changes d get C d by direct summation; many
         // get a fresh product C p.

@@ -42,7 +42,10 @@
 //!
 //! `I_ol` is taken after the truncation of step 5, with the gap of step 1, exactly as in the
 //! paper (a point truncated in this step that still overlaps re-enters at once); truncation
-//! alone does not reset `δ`, only a non-empty `I_ol` does.
+//! alone does not reset `δ`. The paper resets `δ = 0` on any non-empty `I_ol`; here only an
+//! `I_ol` of more than [`OL_KEEP_FRACTION`] of the contact set does, because near the solution
+//! a few boundary points re-enter in almost every step and the paper's rule turns the
+//! iteration into a steepest descent there (see [`OL_KEEP_FRACTION`]).
 //!
 //! Two additions, both outside the paper's normal path:
 //!
@@ -155,6 +158,14 @@
 //! it takes 1.2–2.8× fewer iterations (see [`PRECONDITION_MAX_FRACTION`]); the answer is
 //! the same minimiser (identical contact sets in every test).
 //!
+//! The preconditioner cannot share the transform of the step's product `C t`: it acts on `g`
+//! restricted to `I_c`, and the restriction does not commute with the transform (updating
+//! `M χ g` by `−τ M χ C t` needs the transform of `χ C t`, a second pair anyway). Its pairs are
+//! counted apart ([`Solution::preconditioner_products`]); at 2049², free, `Δ = 0.3 h_s` (RMD
+//! D = 2.2, tol 1e-8) 71 pairs on the 2160² grid (73.3 with the coarse levels' share), about
+//! 20 products of the 4096² padded grid by transform size, next to 92.9 products
+//! (`benchmarks/results/contact_scale.md`).
+//!
 //! # Convergence
 //!
 //! The KKT certificate, relative to the height range `h_s = max h − min h`:
@@ -238,9 +249,18 @@ const SAFEGUARD: f64 = 1e3;
 /// 1e-8): without chord steps 52/130/212 fine products in 34/78/122 iterations; with
 /// 0.3 % 47/113/177 in 42/99/156; 0.5 % 47/122/156 in 42/102/124; 1 % 45/106/154 in
 /// 39/83/112; 3 % 41/118/161 in 36/88/109. A lower fraction means fewer products per
-/// iteration but more (steepest-descent) iterations; 0.5 % keeps the whole solve time within
-/// a few per cent of the best of these.
-pub const CHORD_FRACTION: f64 = 0.005;
+/// iteration but more (steepest-descent) iterations; 0.5 % kept the whole solve time within
+/// a few per cent of the best of these while any `I_ol` entry reset the conjugate direction.
+/// Since small entries keep it ([`OL_KEEP_FRACTION`]) the regular steps converge faster and
+/// 2 % pays: RMD D = 2.2, tol 1e-8, `Δ` in units of the height range, products (fine +
+/// coarse share) 0.5 % → 2 %, displacement / load control at the same contact state: free
+/// 1025² `Δ` = 0.1/0.3/0.6 h_s 36.4/74.9/106.5 → 34.4/66.9/89.5 and 32.1/53.6/78.8 →
+/// 32.1/53.6/68.8; free 2049² `Δ` = 0.3/0.6 h_s 101.9/146.4 → 92.9/150.4 and 80.7/99.8 →
+/// 74.7/102.8; periodic 1025² `Δ` = 0.1/0.3/0.45 h_s 34.4/84.4/110.2 → 33.4/75.4/96.2 and
+/// 33.3/77.3/107.9 → 34.3/71.3/85.9; periodic 2049² `Δ` = 0.3/0.45 h_s 105.1/136.3 →
+/// 100.1/131.3 and 122.9/150.8 → 119.9/129.8 (`benchmarks/results/contact_scale.md`). The
+/// preconditioner's pairs fall with the iterations.
+pub const CHORD_FRACTION: f64 = 0.02;
 
 /// The chord's trial length `τ₀` grows by this factor after a step that used the whole chord
 /// (`s = 1`) and shrinks to `max(s, CHORD_SHRINK_MIN) τ₀` otherwise.
@@ -251,6 +271,27 @@ const CHORD_SHRINK_MIN: f64 = 0.1;
 /// next step a chord step.
 fn wholesale(changed: usize, n_c: usize, sparse_max: usize) -> bool {
     changed > sparse_max && changed as f64 > CHORD_FRACTION * n_c as f64
+}
+
+/// A step whose `I_ol` entries are at most this fraction of the contact set keeps `δ = 1`
+/// (the conjugate direction continues); the paper resets `δ = 0` on any entry. Near the
+/// solution a few boundary points leave by truncation and re-enter through `I_ol` in almost
+/// every step, most of all under load control, whose `Δ` moves every gap a little each step:
+/// with the paper's rule the iteration there is a (preconditioned) steepest descent that
+/// zig-zags at a rate of about 0.9 per step. Measured with chord steps above 0.5 % of the
+/// contact set changing (before [`CHORD_FRACTION`] became 2 %), RMD D = 2.2, free, tol
+/// 1e-8, `Δ` in units of the height range, products fine + coarse, paper's rule → this rule:
+/// 1025² `Δ` = 0.3/0.6 h_s displacement 77.9 → 74.9, 108.5 → 106.5; load at the same
+/// contact state `Δ` = 0.1/0.6 h_s 35.1 → 32.1, 145.8 → 78.8; 2049² `Δ` = 0.3 h_s
+/// displacement 115.9 → 101.9, load 143.7 → 80.7. A fraction of 100 % gave the counts of
+/// 1 % at 1025²; 0.1 % gave counts within ±1 product at 1025² and 104.9 / 88.7 at 2049².
+/// Every step is still checked for descent (`Σ g t > 0`, else steepest).
+pub const OL_KEEP_FRACTION: f64 = 0.01;
+
+/// Whether a step with `n_ol` entries through `I_ol` into a contact set of `n_c` points keeps
+/// the conjugate direction (`δ = 1`).
+fn keeps_conjugacy(n_ol: usize, n_c: usize) -> bool {
+    n_ol as f64 <= OL_KEEP_FRACTION * n_c as f64
 }
 
 /// `should_stop` is polled at least every this many iterations…
