@@ -277,3 +277,25 @@ def test_periodic_load_control_where_preconditioned_steps_stall() -> None:
     assert np.array_equal(pre.pressure >= cap, plain.pressure >= cap)
     assert np.max(np.abs(pre.pressure - plain.pressure)) <= 1e-8 * cap
     assert abs(pre.mean_pressure - 0.05) <= 1e-9 * 0.05
+
+
+@pytest.mark.parametrize(("seed", "fraction"), [(0, 0.75), (1, 0.25), (5, 0.5)])
+def test_load_control_at_a_loose_tolerance_meets_its_load(seed: int, fraction: float) -> None:
+    """At ``tol = 1e-8`` the warm-started solves of the load root search can meet their KKT
+    tolerance without moving, while their load is still a few ``tol`` off: the search must
+    tighten them rather than collapse its bracket and give up. The answer is checked against
+    the bound-constrained QP (scipy) at the approach it reports."""
+    from leakpath.generators import rmd
+
+    s = rmd(6, 2.2, seed=seed)
+    elastic = ContactProblem(s, boundary="periodic")
+    h = s.heights
+    ref = elastic.solve(0.3 * (h.max() - h.mean()), tol=1e-8)
+    cap = fraction * float(ref.pressure.max())
+    problem = ContactProblem(s, boundary="periodic", hardness=cap)
+    state = problem.solve(mean_pressure=ref.mean_pressure, tol=1e-8, warm_start=False)
+    assert abs(state.mean_pressure - ref.mean_pressure) <= 1e-8 * ref.mean_pressure
+    c = dense(problem)
+    want = box_qp(c, state.approach - (h.max() - h).ravel(), cap)
+    assert np.max(np.abs(state.pressure.ravel() - want)) <= 1e-6 * cap
+    assert np.array_equal(state.pressure.ravel() >= cap, want >= cap)

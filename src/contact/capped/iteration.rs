@@ -420,7 +420,9 @@ fn run_steps(
             (red, changes)
         };
         it += 1;
-        cg = up.n_ol + up.n_ul == 0;
+        // As the elastic iteration: only entries (through I_ol or from the cap) of more than
+        // pk::OL_KEEP_FRACTION of the free set reset the conjugate direction.
+        cg = pk::keeps_conjugacy(up.n_ol + up.n_ul, up.n_c - up.n_pl);
         if up.n_nl == 0 {
             state = up;
             fresh = false;

@@ -290,7 +290,7 @@ pub const OL_KEEP_FRACTION: f64 = 0.01;
 
 /// Whether a step with `n_ol` entries through `I_ol` into a contact set of `n_c` points keeps
 /// the conjugate direction (`δ = 1`).
-fn keeps_conjugacy(n_ol: usize, n_c: usize) -> bool {
+pub(crate) fn keeps_conjugacy(n_ol: usize, n_c: usize) -> bool {
     n_ol as f64 <= OL_KEEP_FRACTION * n_c as f64
 }
 
