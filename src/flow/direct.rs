@@ -295,31 +295,27 @@ fn lower_csc(st: &Stencil, index: &[usize], cells: &[usize]) -> (Vec<usize>, Vec
 /// Elimination order (new position → unknown) of the unknowns `index` (grid cell → unknown,
 /// `usize::MAX` for none) for the factor; see the module docs.
 pub(super) fn ordering(st: &Stencil, index: &[usize], m: usize) -> Vec<usize> {
-    let mut out = Vec::with_capacity(m);
-    region_order(
-        st,
-        index,
-        (0, st.ny),
-        (0, st.nx),
-        SPLIT_DEPTH,
-        true,
-        &mut out,
-    );
-    out
+    order_pieces(st, index, m, true)
 }
 
 /// [`ordering`] with blocks on the small pieces only (at most [`BLOCK_MAX_CELLS`] cells), for
 /// the cancellation-free elimination ([`super::gth`]), whose cost grows with the fill more
 /// than the supernodal factor's.
 pub(super) fn elimination_ordering(st: &Stencil, index: &[usize], m: usize) -> Vec<usize> {
+    order_pieces(st, index, m, false)
+}
+
+/// The whole grid's order; `large_blocks` as in [`region_order`].
+fn order_pieces(st: &Stencil, index: &[usize], m: usize, large_blocks: bool) -> Vec<usize> {
     let mut out = Vec::with_capacity(m);
+    let whole = ((0, st.ny), (0, st.nx));
     region_order(
         st,
         index,
-        (0, st.ny),
-        (0, st.nx),
+        whole.0,
+        whole.1,
         SPLIT_DEPTH,
-        false,
+        large_blocks,
         &mut out,
     );
     out

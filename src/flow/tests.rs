@@ -3,7 +3,8 @@ use super::*;
 use faer::prelude::Solve;
 use faer::{Mat, Side};
 
-fn lcg(seed: u64, n: usize) -> Vec<f64> {
+/// Uniform numbers in `[0, 1)` from a fixed linear congruential sequence.
+pub(super) fn lcg(seed: u64, n: usize) -> Vec<f64> {
     let mut s = seed
         .wrapping_mul(6364136223846793005)
         .wrapping_add(1442695040888963407);

@@ -1,21 +1,7 @@
 use super::cycle::Fine;
 use super::*;
 use crate::flow::assemble::fine_stencil;
-
-/// Uniform numbers in `[0, 1)` from a fixed linear congruential sequence.
-fn uniform(seed: u64, n: usize) -> Vec<f64> {
-    let mut s = seed
-        .wrapping_mul(6364136223846793005)
-        .wrapping_add(1442695040888963407);
-    (0..n)
-        .map(|_| {
-            s = s
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (s >> 11) as f64 / (1u64 << 53) as f64
-        })
-        .collect()
-}
+use crate::flow::tests::lcg as uniform;
 
 /// A periodic `ny × nx` stencil with cell conductances spanning six decades.
 fn rough(seed: u64, ny: usize, nx: usize) -> Stencil {
