@@ -101,6 +101,10 @@ def test_reprs_name_the_surface_unit() -> None:
     assert f"V={bare.free_volume:.4g} length^3)" in repr(bare)
     t = percolation_threshold(s)
     assert f"approach={t.approach:.6g} m," in repr(t)
+    f = st.flow()
+    assert f"Q={f.flow_rate:.6g} m^3/t," in repr(f) and f"K={f.permeability:.6g} m^3," in repr(f)
+    bare_flow = leakpath.flow(st.gap.clip(0.0), dx=s.dx, contact=st.contact)
+    assert f"aperture={bare_flow.hydraulic_aperture:.6g} length," in repr(bare_flow)
 
 
 def test_flow(state: leakpath.ContactState) -> None:

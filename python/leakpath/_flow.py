@@ -94,6 +94,9 @@ class Flow:
             NaN for a liquid.
         inlet_pressure, outlet_pressure, gas_constant, temperature: the gas inputs (NaN for
             a liquid).
+        unit: name of the length unit of the gap and ``dx`` (the contact state's surface
+            unit; ``None`` for a bare gap array, printed as ``length``). Times are in the
+            units ``η`` and ``Δp`` imply (seconds for Pa·s and Pa), printed as ``t``.
     """
 
     flow_rate: float
@@ -121,6 +124,7 @@ class Flow:
     outlet_pressure: float = float("nan")
     gas_constant: float = float("nan")
     temperature: float = float("nan")
+    unit: str | None = field(default=None, repr=False)
 
     @property
     def percolates(self) -> bool:
@@ -129,11 +133,15 @@ class Flow:
 
     def __repr__(self) -> str:
         ny, nx = self.pressure.shape
+        u = self.unit or "length"
+        # t and p: the time and pressure units that the viscosity and pressure drop imply.
         return (
-            f"Flow(Q={self.flow_rate:.6g}, conductance={self.conductance:.6g}, "
-            f"K={self.permeability:.6g}, aperture={self.hydraulic_aperture:.6g}, "
+            f"Flow(Q={self.flow_rate:.6g} {u}^3/t, conductance={self.conductance:.6g} "
+            f"{u}^3/(t·p), K={self.permeability:.6g} {u}^3, "
+            f"aperture={self.hydraulic_aperture:.6g} {u}, "
             f"axis={self.axis}, grid={ny}x{nx}, unknowns={self.n_unknowns}, "
-            f"iterations={self.iterations}, residual={self.residual:.1e})"
+            f"iterations={self.iterations}, residual={self.residual:.1e}; "
+            f"t, p: time and pressure units of viscosity and pressure_drop)"
         )
 
 
@@ -509,4 +517,5 @@ def flow(
         dx=dx_f,
         seconds=float(res.seconds),
         **gas_fields,
+        unit=None if state is None else getattr(state, "unit", None),
     )
