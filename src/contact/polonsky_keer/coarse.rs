@@ -25,6 +25,23 @@
 //! coarse level stops on its incrementally updated state, without the confirming product a
 //! solve returned to a caller ends with.
 //!
+//! # What a better start is worth
+//!
+//! Little, measured at 1025² and 2049² (RMD D = 2.2, free, tol 1e-8, `Δ` in units of the
+//! height range; `benchmarks/results/contact_scale.md`). At 2049², `Δ = 0.3 h_s` the coarse
+//! level ends with 35,551 contact points (1.3× its converged set), the prolongation spreads
+//! them to 176,143 fine points, the answer has 93,725; the solve takes 92.9 products.
+//! Started instead from the answer itself with 10 % too much pressure (the exact contact set)
+//! it takes 88: the first preconditioned steps truncate and re-add 5–10 % of the set (most
+//! points of a fractal contact set lie near a boundary), which sets off chord steps, and the
+//! settled set then converges at about 8 conjugate iterations per decade. Tried at 1025²
+//! (`Δ` = 0.1/0.3/0.6 h_s, default 34.4/66.9/89.5 products) and not kept: zeroing the
+//! prolonged pressure where the fine gap of one product `C p₀` is open (44.2/79.7/96.0; with
+//! `Σ p` kept 40.7/63.7/100.3), a projected Jacobi step `p ← max(0, p − ½ g/C_00)` after the
+//! prolongation (34.9/91.4/125.8), coarse tolerance 1e-3 (33.4/77.0/98.5), coarse heights as
+//! the maximum (42.6/66.1/105.4) or mean (34.3/73.3/101.8) of the 3×3 fine block, a smaller
+//! coarse approach (0.85 Δ: 37.1/78.1/125.3).
+//!
 //! # Cost
 //!
 //! A product on the coarse grid costs about a quarter of a fine one; the levels together cost
