@@ -98,7 +98,9 @@ def run_child(kind: str, n: int, levels: int, flow: bool, profile: bool = False)
         code = code.replace(
             "r = leakpath.sweep(", PROFILE + "T0 = time.perf_counter()\nr = leakpath.sweep("
         )
-        code = code.replace("print(json.dumps(out))", "out['records'] = records\nprint(json.dumps(out))")
+        code = code.replace(
+            "print(json.dumps(out))", "out['records'] = records\nprint(json.dumps(out))"
+        )
     proc = subprocess.run(
         [sys.executable, "-c", code, kind, str(n), str(levels), "1" if flow else "0"],
         capture_output=True,
