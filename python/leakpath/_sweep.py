@@ -74,7 +74,8 @@ from the linear extrapolation of the last two pressure fields (:func:`_warm_star
 exact solvers from the previous contact mask. Checkpoints store what a start uses (pressure
 fields, masks), so a sweep resumed from a checkpoint produces a byte-identical CSV.
 ``warm_start=False`` solves every level from ``p = 0`` ("without warm starting", as in the
-paper).
+paper). Polonsky–Keer solves each level to the KKT certificate :data:`SOLVE_TOL` (``1e-10``
+relative to ``h_s``), a hundredth of the :data:`KKT_ACCEPT` a level must meet.
 
 The leak-rate columns of each level are computed by :class:`leakpath.leakage.LevelFlows`,
 beside the next contact solve when there are two or more solver threads; a level is written
