@@ -56,10 +56,53 @@ print(json.dumps(out))
 """
 
 
-def run_child(kind: str, n: int, levels: int, flow: bool) -> dict:
+# --profile: the same sweep with timers wrapped around the sweep's steps (module-level names
+# of leakpath._sweep and leakpath.leakage, replaced in the child only). Each record is
+# (step, level, thread, start, end) with the level's counts for the contact solve.
+PROFILE = r"""
+import leakpath._sweep as S, leakpath.leakage as L, threading
+records, by_state, solves = [], {}, [0]
+def timed(step, fn, level_of):
+    def wrapper(*a, **kw):
+        t0 = time.perf_counter()
+        out = fn(*a, **kw)
+        t1 = time.perf_counter()
+        records.append({"step": step, "k": level_of(a, kw, out), "start": t0 - T0,
+                        "end": t1 - T0, "thread": threading.current_thread().name})
+        return out
+    return wrapper
+def solve_level(a, kw, out):
+    state = out[0]
+    k = solves[0]
+    solves[0] += 1
+    by_state[id(state)] = k
+    records.append({"step": "counts", "k": k, "iterations": out[1], "restarts": out[2],
+                    "fft": state.fft_products, "pre": state.preconditioner_products,
+                    "coarse": state.coarse_fft_products, "contact": state.contact_fraction,
+                    "warm": not isinstance(a[3], bool)})
+    return k
+S._solve_accepted = timed("contact", S._solve_accepted, solve_level)
+S._warm_start_for = timed("warm start", S._warm_start_for, lambda a, kw, out: a[2])
+S.percolations = timed("percolation", S.percolations, lambda a, kw, out: by_state.get(id(a[0])))
+S.nayak_moments = timed("moments", S.nayak_moments, lambda a, kw, out: None)
+S._analyse = timed("analysis", S._analyse, lambda a, kw, out: a[0])
+L._state_digest = timed("flow digest", L._state_digest, lambda a, kw, out: by_state.get(id(a[0])))
+L._timed_columns = timed("flow", L._timed_columns, lambda a, kw, out: by_state.get(id(a[0])))
+"""
+
+
+def run_child(kind: str, n: int, levels: int, flow: bool, profile: bool = False) -> dict:
     env = dict(os.environ)
+    code = CHILD
+    if profile:
+        code = code.replace(
+            "r = leakpath.sweep(", PROFILE + "T0 = time.perf_counter()\nr = leakpath.sweep("
+        )
+        code = code.replace(
+            "print(json.dumps(out))", "out['records'] = records\nprint(json.dumps(out))"
+        )
     proc = subprocess.run(
-        [sys.executable, "-c", CHILD, kind, str(n), str(levels), "1" if flow else "0"],
+        [sys.executable, "-c", code, kind, str(n), str(levels), "1" if flow else "0"],
         capture_output=True,
         text=True,
         env=env,
@@ -70,6 +113,69 @@ def run_child(kind: str, n: int, levels: int, flow: bool) -> dict:
     return json.loads(proc.stdout.strip().splitlines()[-1])
 
 
+def profile_table(n: int, levels: int, res: dict) -> list[str]:
+    """Per-level table of one profiled sweep (seconds of each step, summed per level)."""
+    recs = res["records"]
+    counts = {r["k"]: r for r in recs if r["step"] == "counts"}
+    steps = ["warm start", "contact", "percolation", "moments", "analysis", "flow digest", "flow"]
+    # Moments carry no level: the analysis running on the same thread around them has it.
+    analyses = [r for r in recs if r["step"] == "analysis"]
+    for r in recs:
+        if r["step"] == "moments":
+            for a in analyses:
+                if a["thread"] == r["thread"] and a["start"] <= r["start"] <= a["end"]:
+                    r["k"] = a["k"]
+    sums: dict[tuple[str, int], float] = {}
+    threads: dict[tuple[str, int], str] = {}
+    for r in recs:
+        if r["step"] in steps and r["k"] is not None:
+            key = (r["step"], r["k"])
+            sums[key] = sums.get(key, 0.0) + r["end"] - r["start"]
+            threads[key] = r["thread"]
+    contact_end = {r["k"]: r["end"] for r in recs if r["step"] == "contact"}
+    lines = [
+        f"Per level, {n}² (`--profile`; sweep {res['seconds']:.1f} s wall, "
+        f"{res['cpu_seconds']:.1f} s CPU, peak RSS {res['peak_mib']:.0f} MiB). Seconds of "
+        "each step; `rest of row` = the analysis minus percolation and moments (volumes, "
+        "counts, class map); `level` = wall time from the end of the previous contact solve "
+        "to the end of this one. Steps on the `leakpath-flow` thread overlap the next contact "
+        "solve.",
+        "",
+        "| k | contact fraction | start | iterations | FFT products | preconditioner products "
+        "| contact solve [s] | warm start [s] | percolation [s] | moments [s] | rest of row [s] "
+        "| flow digest [s] | flow [s] | level [s] |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    tot = dict.fromkeys(steps + ["rest", "iter", "fft", "pre"], 0.0)
+    prev = 0.0
+    for k in range(levels + 1):
+        c = counts.get(k, {})
+        g = {st: sums.get((st, k), 0.0) for st in steps}
+        rest = g["analysis"] - g["percolation"] - g["moments"]
+        for st in steps:
+            tot[st] += g[st]
+        tot["rest"] += rest
+        tot["iter"] += c.get("iterations", 0)
+        tot["fft"] += c.get("fft", 0)
+        tot["pre"] += c.get("pre", 0)
+        end = contact_end.get(k, prev)
+        lines.append(
+            f"| {k} | {c.get('contact', float('nan')):.4f} | "
+            f"{'warm' if c.get('warm') else 'cold'} | {c.get('iterations', '')} | "
+            f"{c.get('fft', '')} | {c.get('pre', '')} | {g['contact']:.2f} | "
+            f"{g['warm start']:.2f} | {g['percolation']:.2f} | {g['moments']:.2f} | "
+            f"{rest:.2f} | {g['flow digest']:.2f} | {g['flow']:.2f} | {end - prev:.2f} |"
+        )
+        prev = end
+    lines.append(
+        f"| all | | | {tot['iter']:.0f} | {tot['fft']:.0f} | {tot['pre']:.0f} | "
+        f"{tot['contact']:.1f} | {tot['warm start']:.1f} | {tot['percolation']:.1f} | "
+        f"{tot['moments']:.1f} | {tot['rest']:.1f} | {tot['flow digest']:.1f} | "
+        f"{tot['flow']:.1f} | {res['seconds']:.1f} |"
+    )
+    return lines
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sizes", type=int, nargs="+", default=[2049])
@@ -77,6 +183,11 @@ def main() -> None:
     ap.add_argument("--levels", type=int, default=20)
     ap.add_argument("--repeats", type=int, default=1)
     ap.add_argument("--out", type=Path, default=None)
+    ap.add_argument(
+        "--profile",
+        action="store_true",
+        help="one sweep with the flow per size, timing each step per level (wrapped timers)",
+    )
     a = ap.parse_args()
     for n in a.sizes:
         if a.kind == "rmd" and 2 ** round(math.log2(n - 1)) + 1 != n:
@@ -104,7 +215,15 @@ def main() -> None:
         "| flow share | peak RSS with flow [MiB] | percolating levels | solvers |",
         "|---|---|---|---|---|---|---|---|---|---|",
     ]
-    for n in a.sizes:
+    if a.profile:
+        lines = lines[:-3] + [""]
+        lines[0] = lines[0].replace("` (", " --profile` (")
+        for n in a.sizes:
+            res = run_child(a.kind, n, a.levels, True, profile=True)
+            table = profile_table(n, a.levels, res)
+            lines += table + [""]
+            print("\n".join(table), flush=True)
+    for n in [] if a.profile else a.sizes:
         with_flow = [run_child(a.kind, n, a.levels, True) for _ in range(a.repeats)]
         without = [run_child(a.kind, n, a.levels, False) for _ in range(a.repeats)]
         tf = statistics.median(r["seconds"] for r in with_flow)

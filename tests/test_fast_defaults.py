@@ -17,6 +17,7 @@ from scipy import ndimage
 
 import leakpath
 from leakpath import sweep
+from leakpath._sweep import KKT_ACCEPT, SOLVE_TOL
 from leakpath.contact import AUTO_ACTIVE_SET_MAX_POINTS, DEFAULT_TOL, ContactProblem, solve
 
 LEVELS = 10
@@ -59,6 +60,8 @@ def test_default_sweep_has_the_exact_contact_sets(surface, default_sweep):
         assert np.array_equal(default_sweep.contact_mask(k), exact.contact), k
         assert row["free_volume"] == pytest.approx(exact.free_volume, rel=1e-9, abs=1e-15)
         assert row["solver"] == "polonsky-keer"
+        assert row["kkt"] <= SOLVE_TOL  # the sweep's tolerance, below its acceptance
+    assert default_sweep.parameters["solve_tol"] == SOLVE_TOL < KKT_ACCEPT
     deep = solve(surface, 1.3 * surface.height_range)
     exact = prob.solve(1.3 * surface.height_range, solver="active-set")
     assert np.array_equal(deep.contact, exact.contact)

@@ -347,8 +347,8 @@ def _add_sweep_output_arguments(p: argparse.ArgumentParser, default_out: str) ->
 _SOLVER_HELP = (
     "contact solver: auto (default; Polonsky–Keer with an FFT preconditioner on grids above "
     "32 x 32 points, the exact active set below: the same unique minimiser, KKT certificate "
-    "<= 1e-12 h_s), polonsky-keer, active-set, or lawson-hanson (the paper's algorithm "
-    "itself, slow)"
+    "<= 1e-12 h_s, <= 1e-10 h_s on a sweep's levels), polonsky-keer, active-set, or "
+    "lawson-hanson (the paper's algorithm itself, slow)"
 )
 
 
