@@ -81,7 +81,7 @@ impl Fine<'_> {
                 let k = self.cells[i] as usize;
                 let (v, out) = self.row(k, i0, xc, old);
                 let d = self.st.d[k];
-                xc[t] += (b[i] - d * xc[t] + v) * (1.0 / (d + out));
+                xc[t] += (b[i] - d * xc[t] + v) / (d + out);
             };
             if reverse {
                 for t in (0..m).rev() {

@@ -213,7 +213,7 @@ impl Graph {
                     };
                     v += w * xj;
                 }
-                xc[t] += v * (1.0 / (self.d[i] + out));
+                xc[t] += v / (self.d[i] + out);
             };
             if reverse {
                 for t in (0..i1 - i0).rev() {
@@ -412,11 +412,18 @@ impl Multigrid {
     /// Bytes held by the hierarchy (the fine stencil not counted).
     pub fn bytes(&self) -> u64 {
         // Per entry: column 4 + single-precision value 4 (interpolation: both by rows and by
-        // columns); per row: pointer, diagonal, reservoir part, and 3 work vectors.
-        let g =
-            |g: &Graph| 8 * (g.ptr.len() + g.dir.len() + g.d.len()) + 8 * g.col.len() + 24 * g.n;
+        // columns); per row: pointer, diagonal, reservoir part; and the work vectors (one on
+        // the finest level, three below).
+        let g = |g: &Graph| 8 * (g.ptr.len() + g.dir.len() + g.d.len()) + 8 * g.col.len();
         let p = |p: &Interp| 8 * (p.ptr.len() + p.tptr.len()) + 16 * p.col.len();
+        let work: usize = {
+            let bufs = self.bufs.lock().unwrap_or_else(|e| e.into_inner());
+            bufs.iter()
+                .map(|b| 8 * (b.x.len() + b.b.len() + b.r.len()))
+                .sum()
+        };
         (4 * (self.cells.len() + self.index.len())
+            + work
             + self.levels.iter().map(g).sum::<usize>()
             + self.interps.iter().map(p).sum::<usize>()) as u64
     }
