@@ -222,6 +222,10 @@ pub fn pcg(
 /// Relative residual each inner solve of [`refined`] reaches.
 pub const INNER_TOL: f64 = 1e-6;
 
+/// A refinement step whose true residual is below `tol` but no longer halves is at the
+/// round-off floor of `x`: its measure is accepted up to this.
+const FLOOR_ACCEPT: f64 = 1e2;
+
 /// Refinement steps at most in [`refined`].
 const REFINE_STEPS: usize = 8;
 
@@ -234,7 +238,9 @@ const REFINE_STEPS: usize = 8;
 /// the rounding of `A x` in the large rows it lies (a flow rate many decades below the
 /// conductances near the percolation threshold), where one long CG run stalls at that
 /// rounding. `converged` is false after `max_iter` inner iterations in total, or when a step
-/// no longer halves the measure (then accepted within [`STALL_ACCEPT`] of the target).
+/// no longer halves the measure (then accepted within [`STALL_ACCEPT`] of the target); a
+/// step whose true residual, already below `tol`, no longer halves either ends it with a
+/// measure up to [`FLOOR_ACCEPT`] accepted.
 #[allow(clippy::too_many_arguments)]
 pub fn refined(
     apply: &dyn Fn(&[f64], &mut [f64]),
@@ -267,6 +273,7 @@ pub fn refined(
     let mut d = vec![0.0; n];
     let mut it = 0;
     let mut last = f64::INFINITY;
+    let mut last_rel = f64::INFINITY;
     let mut step = 0;
     loop {
         let t0 = Instant::now();
@@ -287,6 +294,16 @@ pub fn refined(
                 converged: true,
             });
         }
+        // At the round-off floor: the true residual no longer halves (it is the rounding
+        // of `x` itself, which no correction removes) and the rate is within FLOOR_ACCEPT
+        // of its target; further steps only trade the measure's round-off.
+        if step >= 2 && rel <= tol && rel > 0.5 * last_rel && m <= FLOOR_ACCEPT {
+            return Ok(Outcome {
+                iterations: it,
+                residual: rel,
+                converged: true,
+            });
+        }
         let stalled = step >= 2 && m > 0.5 * last && rel <= tol;
         if stalled || step >= REFINE_STEPS || it >= max_iter || !rel.is_finite() {
             return Ok(Outcome {
@@ -296,6 +313,7 @@ pub fn refined(
             });
         }
         last = m;
+        last_rel = rel;
         step += 1;
         d.iter_mut().for_each(|v| *v = 0.0);
         let inner = pcg(
