@@ -170,6 +170,38 @@ impl Stencil {
         self.residual_of_parts(&[hi, lo], b, r);
     }
 
+    /// [`Stencil::residual_compensated`] on the unknowns only: unknown `i` is cell
+    /// `cells[i]`, `index` maps a cell to its unknown (`u32::MAX` without one, whose value
+    /// is 0), and `x`, `b`, `r` have one entry per unknown. Rows in fixed chunks of
+    /// `chunk` unknowns.
+    pub fn residual_compensated_on(
+        &self,
+        cells: &[u32],
+        index: &[u32],
+        x: &[f64],
+        b: &[f64],
+        r: &mut [f64],
+        chunk: usize,
+    ) {
+        r.par_chunks_mut(chunk).enumerate().for_each(|(blk, rc)| {
+            let i0 = blk * chunk;
+            for (t, rv) in rc.iter_mut().enumerate() {
+                let i = i0 + t;
+                let k = cells[i] as usize;
+                let mut acc = Compensated::new(b[i]);
+                acc.add_product(-self.dir[k], x[i]);
+                self.for_each_face(k, |l, c| {
+                    acc.add_product(-c, x[i]);
+                    let j = index[l];
+                    if j != u32::MAX {
+                        acc.add_product(c, x[j as usize]);
+                    }
+                });
+                *rv = acc.value();
+            }
+        });
+    }
+
     /// `r = b − A Σ parts`, each row summed in double-double arithmetic from the faces and
     /// the reservoir conductance, not the rounded diagonal: a face below ε d_k is part of the
     /// residual too.

@@ -1,8 +1,23 @@
 //! Preconditioned conjugate gradients with reductions that do not depend on the thread count.
 
+use std::sync::OnceLock;
+use std::time::Instant;
+
 use rayon::prelude::*;
 
 use crate::error::{Error, Result};
+
+/// Whether `LEAKPATH_FLOW_PROFILE` is set: stage timings of the iterative solver are then
+/// printed to standard error (a development aid; no result depends on it).
+pub(crate) fn profiling() -> bool {
+    static ON: OnceLock<bool> = OnceLock::new();
+    *ON.get_or_init(|| std::env::var_os("LEAKPATH_FLOW_PROFILE").is_some())
+}
+
+/// Seconds since `t`.
+pub(crate) fn secs(t: Instant) -> f64 {
+    t.elapsed().as_secs_f64()
+}
 
 /// Reductions sum fixed chunks of this many entries, each in index order, then the chunk
 /// sums in chunk order: the same bits for any number of threads.
@@ -99,6 +114,9 @@ pub fn pcg(
     let mut checked = true; // r is the true residual
     let mut p = vec![0.0; n];
     let mut rz = 0.0;
+    let prof = profiling();
+    let (mut t_pre, mut t_apply) = (0.0, 0.0);
+    let t_all = Instant::now();
     loop {
         if checked && rnorm <= tol * bnorm {
             let m = measure(x, &r);
@@ -128,7 +146,9 @@ pub fn pcg(
         }
         // Flexible (Polak–Ribière) β: the K-cycle preconditioner is not a fixed linear map.
         let rz_old_new = dot(&r, &z);
+        let t0 = Instant::now();
         precond(&r, &mut z);
+        t_pre += secs(t0);
         let rz_new = dot(&r, &z);
         let beta = if it == 0 {
             0.0
@@ -143,7 +163,9 @@ pub fn pcg(
                     .zip(zc)
                     .for_each(|(pv, zv)| *pv = zv + beta * *pv)
             });
+        let t0 = Instant::now();
         apply(&p, &mut q);
+        t_apply += secs(t0);
         let pq = dot(&p, &q);
         if pq <= 0.0 || !pq.is_finite() || rz <= 0.0 {
             // Exact solution reached, or a breakdown: the check below reports which.
@@ -174,6 +196,22 @@ pub fn pcg(
         true_residual(residual, b, x, &mut r);
         rnorm = dot(&r, &r).sqrt();
     }
+    if prof {
+        let sub = |v: &[f64]| v.iter().filter(|x| x.is_subnormal()).count();
+        eprintln!(
+            "[flow profile] cg: {it} iterations, {:.3} s: preconditioner {t_pre:.3} s, \
+             operator {t_apply:.3} s, rest {:.3} s; residual {:.2e}; subnormal entries \
+             x {} r {} z {} p {} q {}",
+            secs(t_all),
+            secs(t_all) - t_pre - t_apply,
+            rnorm / bnorm,
+            sub(x),
+            sub(&r),
+            sub(&z),
+            sub(&p),
+            sub(&q)
+        );
+    }
     Ok(Outcome {
         iterations: it,
         residual: rnorm / bnorm,
@@ -183,6 +221,10 @@ pub fn pcg(
 
 /// Relative residual each inner solve of [`refined`] reaches.
 pub const INNER_TOL: f64 = 1e-6;
+
+/// A refinement step whose true residual is below `tol` but no longer halves is at the
+/// round-off floor of `x`: its measure is accepted up to this.
+const FLOOR_ACCEPT: f64 = 1e2;
 
 /// Refinement steps at most in [`refined`].
 const REFINE_STEPS: usize = 8;
@@ -196,7 +238,9 @@ const REFINE_STEPS: usize = 8;
 /// the rounding of `A x` in the large rows it lies (a flow rate many decades below the
 /// conductances near the percolation threshold), where one long CG run stalls at that
 /// rounding. `converged` is false after `max_iter` inner iterations in total, or when a step
-/// no longer halves the measure (then accepted within [`STALL_ACCEPT`] of the target).
+/// no longer halves the measure (then accepted within [`STALL_ACCEPT`] of the target); a
+/// step whose true residual, already below `tol`, no longer halves either ends it with a
+/// measure up to [`FLOOR_ACCEPT`] accepted.
 #[allow(clippy::too_many_arguments)]
 pub fn refined(
     apply: &dyn Fn(&[f64], &mut [f64]),
@@ -229,12 +273,31 @@ pub fn refined(
     let mut d = vec![0.0; n];
     let mut it = 0;
     let mut last = f64::INFINITY;
+    let mut last_rel = f64::INFINITY;
     let mut step = 0;
     loop {
+        let t0 = Instant::now();
         exact(x, b, &mut r);
         let rel = dot(&r, &r).sqrt() / bnorm;
         let m = measure(x, &r);
+        if profiling() {
+            eprintln!(
+                "[flow profile] refinement step {step}: residual {rel:.2e}, measure {m:.2e}, \
+                 exact residual and measure {:.3} s",
+                secs(t0)
+            );
+        }
         if rel <= tol && m <= 1.0 {
+            return Ok(Outcome {
+                iterations: it,
+                residual: rel,
+                converged: true,
+            });
+        }
+        // At the round-off floor: the true residual no longer halves (it is the rounding
+        // of `x` itself, which no correction removes) and the rate is within FLOOR_ACCEPT
+        // of its target; further steps only trade the measure's round-off.
+        if step >= 2 && rel <= tol && rel > 0.5 * last_rel && m <= FLOOR_ACCEPT {
             return Ok(Outcome {
                 iterations: it,
                 residual: rel,
@@ -250,6 +313,7 @@ pub fn refined(
             });
         }
         last = m;
+        last_rel = rel;
         step += 1;
         d.iter_mut().for_each(|v| *v = 0.0);
         let inner = pcg(

@@ -243,27 +243,28 @@ pub(super) fn solve_multigrid(
     opts: &Options<'_>,
     max_iter: usize,
 ) -> Result<std::result::Result<MultigridOk, Error>> {
-    let n = b_in.len();
-    let st = mg.fine();
+    // Everything runs on the unknowns (the spanning cells), not the grid's cells.
     let qtol = opts.tol;
-    let apply = |v: &[f64], out: &mut [f64]| st.apply(v, out);
-    let mut pre = |r: &[f64], z: &mut [f64]| mg.apply(r, z);
+    let (b_in, b_out) = (&mg.gather(b_in), &mg.gather(b_out));
+    let n = b_in.len();
+    let apply = |v: &[f64], out: &mut [f64]| mg.operator(v, out);
+    let mut pre = |r: &[f64], z: &mut [f64]| mg.precondition(r, z);
     // The rate's first-order error at most `tol` of it, and the pressure change a Jacobi step
     // would make, `max |r_k| / d_k`, at most `tol` (a dead end behind a narrow face has a
     // small residual for a large pressure error).
     fn accurate<'a>(
-        st: &'a assemble::Stencil,
+        mg: &'a Multigrid,
         w: &'a [f64],
         qtol: f64,
     ) -> impl Fn(&[f64], &[f64]) -> f64 + 'a {
         move |x: &[f64], r: &[f64]| {
             let jacobi = r
                 .par_chunks(cg::CHUNK)
-                .zip(st.d.par_chunks(cg::CHUNK))
-                .map(|(rc, dc)| {
-                    rc.iter()
-                        .zip(dc)
-                        .fold(0.0, |m: f64, (rv, dv)| m.max(rv.abs() / dv))
+                .enumerate()
+                .map(|(blk, rc)| {
+                    rc.iter().enumerate().fold(0.0, |m: f64, (t, rv)| {
+                        m.max(rv.abs() / mg.diagonal(blk * cg::CHUNK + t))
+                    })
                 })
                 .reduce(|| 0.0, f64::max);
             let rate = rate_error(x, r).abs() / (qtol * cg::dot(w, x).abs());
@@ -271,12 +272,12 @@ pub(super) fn solve_multigrid(
         }
     }
     let mut x = vec![0.0; n];
-    let exact = |x: &[f64], b: &[f64], r: &mut [f64]| st.residual_compensated(x, b, r);
+    let exact = |x: &[f64], b: &[f64], r: &mut [f64]| mg.residual_exact(x, b, r);
     let a = cg::refined(
         &apply,
         &exact,
         &mut pre,
-        &accurate(st, b_out, qtol),
+        &accurate(mg, b_out, qtol),
         b_in,
         &mut x,
         opts.tol,
@@ -292,16 +293,12 @@ pub(super) fn solve_multigrid(
         return Ok(Err(failed(&a, "pressure")));
     }
     // ψ from 1 − φ: only the digits that φ cannot hold near 1 are left to find.
-    let mut psi: Vec<f64> = x
-        .par_iter()
-        .zip(st.active.par_iter())
-        .map(|(&v, &on)| if on { 1.0 - v } else { 0.0 })
-        .collect();
+    let mut psi: Vec<f64> = x.par_iter().map(|&v| 1.0 - v).collect();
     let b = cg::refined(
         &apply,
         &exact,
         &mut pre,
-        &accurate(st, b_in, qtol),
+        &accurate(mg, b_in, qtol),
         b_out,
         &mut psi,
         opts.tol,
@@ -323,6 +320,8 @@ pub(super) fn solve_multigrid(
             &format!("inlet rate {q_in:e} and outlet rate {q_out:e} differ"),
         )));
     }
+    let x = mg.scatter(&x);
+    let psi = mg.scatter(&psi);
     Ok(Ok((x, psi, total.residual, total.iterations)))
 }
 

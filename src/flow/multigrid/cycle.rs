@@ -44,7 +44,7 @@ impl Fine<'_> {
     }
 
     /// [`Graph::residual`] on the finest level.
-    fn residual(&self, x: &[f64], b: &[f64], r: &mut [f64]) {
+    pub(super) fn residual(&self, x: &[f64], b: &[f64], r: &mut [f64]) {
         r.par_chunks_mut(CHUNK).enumerate().for_each(|(blk, rc)| {
             let i0 = blk * CHUNK;
             for (t, rv) in rc.iter_mut().enumerate() {
@@ -52,6 +52,19 @@ impl Fine<'_> {
                 let k = self.cells[i] as usize;
                 let (v, _) = self.row(k, 0, &[], x);
                 *rv = b[i] - self.st.d[k] * x[i] + v;
+            }
+        });
+    }
+
+    /// `y = A x` on the finest level.
+    pub(super) fn product(&self, x: &[f64], y: &mut [f64]) {
+        y.par_chunks_mut(CHUNK).enumerate().for_each(|(blk, yc)| {
+            let i0 = blk * CHUNK;
+            for (t, yv) in yc.iter_mut().enumerate() {
+                let i = i0 + t;
+                let k = self.cells[i] as usize;
+                let (v, _) = self.row(k, 0, &[], x);
+                *yv = self.st.d[k] * x[i] - v;
             }
         });
     }
@@ -83,24 +96,27 @@ impl Fine<'_> {
     }
 }
 
-/// One V-cycle on `levels[0]` for `bufs[0].b` into `bufs[0].x`; `fine`: `levels[0]` is the
-/// finest level, applied from the stencil.
+/// One V-cycle on `levels[0]` for `b` into `x`; `bufs[0].r` is this level's scratch and
+/// `bufs[1..]` hold the vectors of the levels below; `fine`: `levels[0]` is the finest
+/// level, applied from the stencil.
 pub(super) fn vcycle(
     levels: &[Graph],
     interps: &[Interp],
+    b: &[f64],
+    x: &mut [f64],
     bufs: &mut [Buffers],
     coarse: &DenseCholesky,
     fine: Option<&Fine<'_>>,
 ) {
-    let (here, rest) = bufs.split_first_mut().expect("a level");
     if levels.len() == 1 {
-        coarse.solve(&here.b, &mut here.x);
+        coarse.solve(b, x);
         return;
     }
+    let (here, rest) = bufs.split_first_mut().expect("a level");
     let g = &levels[0];
     let ip = &interps[0];
     // `r` is the sweeps' scratch too: the residual is dead once restricted.
-    let Buffers { x, b, r } = here;
+    let r = &mut here.r;
     x.par_iter_mut().for_each(|v| *v = 0.0);
     match fine {
         Some(f) => {
@@ -112,35 +128,42 @@ pub(super) fn vcycle(
             g.residual(x, b, r);
         }
     }
-    {
-        let below = &mut rest[0];
-        below
-            .b
-            .par_chunks_mut(CHUNK)
-            .enumerate()
-            .for_each(|(blk, bc)| {
-                for (t, bv) in bc.iter_mut().enumerate() {
-                    let c = blk * CHUNK + t;
-                    let mut s = 0.0;
-                    for q in ip.tptr[c]..ip.tptr[c + 1] {
-                        s += f64::from(ip.tval[q]) * r[ip.trow[q] as usize];
-                    }
-                    *bv = s;
-                }
-            });
-    }
-    vcycle(&levels[1..], &interps[1..], rest, coarse, None);
-    let xc = &rest[0].x;
+    // The level below's right-hand side and solution, taken out of its buffers for the
+    // recursion (no copy) and put back after.
+    let mut bc = std::mem::take(&mut rest[0].b);
+    let mut xc = std::mem::take(&mut rest[0].x);
+    bc.par_chunks_mut(CHUNK).enumerate().for_each(|(blk, bs)| {
+        for (t, bv) in bs.iter_mut().enumerate() {
+            let c = blk * CHUNK + t;
+            let mut s = 0.0;
+            for q in ip.tptr[c]..ip.tptr[c + 1] {
+                s += f64::from(ip.tval[q]) * r[ip.trow[q] as usize];
+            }
+            *bv = s;
+        }
+    });
+    vcycle(
+        &levels[1..],
+        &interps[1..],
+        &bc,
+        &mut xc,
+        rest,
+        coarse,
+        None,
+    );
+    let xcr = &xc;
     x.par_chunks_mut(CHUNK).enumerate().for_each(|(blk, xs)| {
         for (t, v) in xs.iter_mut().enumerate() {
             let i = blk * CHUNK + t;
             let mut s = 0.0;
             for p in ip.ptr[i]..ip.ptr[i + 1] {
-                s += f64::from(ip.val[p]) * xc[ip.col[p] as usize];
+                s += f64::from(ip.val[p]) * xcr[ip.col[p] as usize];
             }
             *v += s;
         }
     });
+    rest[0].b = bc;
+    rest[0].x = xc;
     match fine {
         Some(f) => f.smooth(b, x, r, true),
         None => g.smooth(b, x, r, true),

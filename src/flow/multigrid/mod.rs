@@ -86,11 +86,12 @@ mod rows;
 mod tests;
 
 use std::sync::Mutex;
+use std::time::Instant;
 
 use rayon::prelude::*;
 
 use super::assemble::Stencil;
-use super::cg::CHUNK;
+use super::cg::{profiling, secs, CHUNK};
 use coarsen::{split, strong, strongest};
 #[cfg(test)]
 use coarsen::{split_in_blocks, SPLIT_BLOCK};
@@ -262,14 +263,29 @@ fn unknowns(st: &Stencil) -> (Vec<u32>, Vec<u32>) {
 /// the splitting keeps no unknown or more than [`MIN_REDUCTION`] of them.
 fn coarsen(g: &impl Rows) -> Option<(Interp, Graph)> {
     let n = g.n();
+    let t0 = Instant::now();
     let wmax = strongest(g);
+    let t1 = Instant::now();
     let (cidx, nc) = split(g, &wmax);
+    let t2 = Instant::now();
     if nc == 0 || nc as f64 > MIN_REDUCTION * n as f64 {
         return None;
     }
     let (ip, delta) = interpolation(g, &wmax, &cidx, nc);
     drop((cidx, wmax));
+    let t3 = Instant::now();
     let c = galerkin(g, &ip, &delta, nc);
+    if profiling() {
+        eprintln!(
+            "[flow profile] level of {n} unknowns -> {nc}: strength {:.3} s, splitting {:.3} s, \
+             interpolation {:.3} s, Galerkin {:.3} s ({} entries)",
+            (t1 - t0).as_secs_f64(),
+            (t2 - t1).as_secs_f64(),
+            (t3 - t2).as_secs_f64(),
+            secs(t3),
+            c.col.len()
+        );
+    }
     Some((ip, c))
 }
 
@@ -296,6 +312,7 @@ impl Multigrid {
     /// level is built from the stencil's rows directly; each level's reservoir part is
     /// freed once the level below it is built.
     pub fn new(fine: Stencil) -> Self {
+        let t_setup = Instant::now();
         let (cells, index) = unknowns(&fine);
         let top = Fine {
             st: &fine,
@@ -332,14 +349,26 @@ impl Multigrid {
             interps.push(ip);
             levels.push(c);
         }
+        // The finest level's right-hand side and solution are the caller's vectors: only
+        // its scratch is kept (none when it is the coarsest, solved by the dense factor).
         let bufs = levels
             .iter()
-            .map(|g| {
+            .enumerate()
+            .map(|(l, g)| {
                 let n = g.n;
-                Buffers {
-                    x: vec![0.0; n],
-                    b: vec![0.0; n],
-                    r: vec![0.0; n],
+                if l == 0 {
+                    let n = if levels.len() > 1 { n } else { 0 };
+                    Buffers {
+                        x: Vec::new(),
+                        b: Vec::new(),
+                        r: vec![0.0; n],
+                    }
+                } else {
+                    Buffers {
+                        x: vec![0.0; n],
+                        b: vec![0.0; n],
+                        r: vec![0.0; n],
+                    }
                 }
             })
             .collect();
@@ -350,6 +379,13 @@ impl Multigrid {
         };
         for g in levels.iter_mut() {
             g.dir = Vec::new();
+        }
+        if profiling() {
+            eprintln!(
+                "[flow profile] multigrid setup {:.3} s, {} levels",
+                secs(t_setup),
+                levels.len()
+            );
         }
         Multigrid {
             fine,
@@ -376,11 +412,18 @@ impl Multigrid {
     /// Bytes held by the hierarchy (the fine stencil not counted).
     pub fn bytes(&self) -> u64 {
         // Per entry: column 4 + single-precision value 4 (interpolation: both by rows and by
-        // columns); per row: pointer, diagonal, reservoir part, and 3 work vectors.
-        let g =
-            |g: &Graph| 8 * (g.ptr.len() + g.dir.len() + g.d.len()) + 8 * g.col.len() + 24 * g.n;
+        // columns); per row: pointer, diagonal, reservoir part; and the work vectors (one on
+        // the finest level, three below).
+        let g = |g: &Graph| 8 * (g.ptr.len() + g.dir.len() + g.d.len()) + 8 * g.col.len();
         let p = |p: &Interp| 8 * (p.ptr.len() + p.tptr.len()) + 16 * p.col.len();
+        let work: usize = {
+            let bufs = self.bufs.lock().unwrap_or_else(|e| e.into_inner());
+            bufs.iter()
+                .map(|b| 8 * (b.x.len() + b.b.len() + b.r.len()))
+                .sum()
+        };
         (4 * (self.cells.len() + self.index.len())
+            + work
             + self.levels.iter().map(g).sum::<usize>()
             + self.interps.iter().map(p).sum::<usize>()) as u64
     }
@@ -403,32 +446,32 @@ impl Multigrid {
     }
 
     /// `z = M⁻¹ r` on the grid's cells (0 on cells without unknowns): one V-cycle from 0.
+    #[cfg(test)]
     pub fn apply(&self, r: &[f64], z: &mut [f64]) {
-        let mut bufs = self.bufs.lock().unwrap_or_else(|e| e.into_inner());
-        let cells = &self.cells;
-        {
-            let b = &mut bufs[0].b;
-            b.par_chunks_mut(CHUNK)
-                .zip(cells.par_chunks(CHUNK))
-                .for_each(|(bc, cc)| bc.iter_mut().zip(cc).for_each(|(v, &k)| *v = r[k as usize]));
-        }
-        let top = Fine {
-            st: &self.fine,
-            cells,
-            index: &self.index,
-        };
-        vcycle(
-            &self.levels,
-            &self.interps,
-            &mut bufs,
-            &self.coarse,
-            Some(&top),
-        );
-        z.par_iter_mut().for_each(|v| *v = 0.0);
-        let x = &bufs[0].x;
-        // Scatter: each unknown's cell is distinct.
+        let mut zu = vec![0.0; self.n_unknowns()];
+        self.precondition(&self.gather(r), &mut zu);
+        z.copy_from_slice(&self.scatter(&zu));
+    }
+
+    /// Fine unknowns.
+    pub fn n_unknowns(&self) -> usize {
+        self.cells.len()
+    }
+
+    /// The entries of the cell vector `v` at the unknowns' cells (one per unknown).
+    pub fn gather(&self, v: &[f64]) -> Vec<f64> {
+        self.cells
+            .par_iter()
+            .with_min_len(CHUNK)
+            .map(|&k| v[k as usize])
+            .collect()
+    }
+
+    /// The cell vector with `x` (one entry per unknown) on the unknowns' cells, 0 elsewhere.
+    pub fn scatter(&self, x: &[f64]) -> Vec<f64> {
+        let mut z = vec![0.0; self.index.len()];
         let zp = SharedMut(z.as_mut_ptr());
-        cells
+        self.cells
             .par_chunks(CHUNK)
             .zip(x.par_chunks(CHUNK))
             .for_each(move |(cc, xc)| {
@@ -439,5 +482,47 @@ impl Multigrid {
                     unsafe { *zp.0.add(k as usize) = v };
                 }
             });
+        z
+    }
+
+    /// Diagonal `d_i` of fine unknown `i`.
+    pub fn diagonal(&self, i: usize) -> f64 {
+        self.fine.d[self.cells[i] as usize]
+    }
+
+    fn top(&self) -> Fine<'_> {
+        Fine {
+            st: &self.fine,
+            cells: &self.cells,
+            index: &self.index,
+        }
+    }
+
+    /// `y = A x` on the unknowns.
+    pub fn operator(&self, x: &[f64], y: &mut [f64]) {
+        let top = self.top();
+        top.product(x, y);
+    }
+
+    /// `r = b − A x` on the unknowns, each row summed in double-double arithmetic
+    /// ([`Stencil::residual_compensated`]).
+    pub fn residual_exact(&self, x: &[f64], b: &[f64], r: &mut [f64]) {
+        self.fine
+            .residual_compensated_on(&self.cells, &self.index, x, b, r, CHUNK);
+    }
+
+    /// `z = M⁻¹ r` on the unknowns: one V-cycle from 0.
+    pub fn precondition(&self, r: &[f64], z: &mut [f64]) {
+        let mut bufs = self.bufs.lock().unwrap_or_else(|e| e.into_inner());
+        let top = self.top();
+        vcycle(
+            &self.levels,
+            &self.interps,
+            r,
+            z,
+            &mut bufs,
+            &self.coarse,
+            Some(&top),
+        );
     }
 }
