@@ -43,30 +43,27 @@ impl Fine<'_> {
         (v, out)
     }
 
-    /// [`Graph::residual`] on the finest level.
-    pub(super) fn residual(&self, x: &[f64], b: &[f64], r: &mut [f64]) {
-        r.par_chunks_mut(CHUNK).enumerate().for_each(|(blk, rc)| {
+    /// `out_i = f(i, d_i x_i, Σ_j w_ij x_j)` over the finest level's rows, in parallel chunks.
+    fn map_rows(&self, x: &[f64], out: &mut [f64], f: impl Fn(usize, f64, f64) -> f64 + Sync) {
+        out.par_chunks_mut(CHUNK).enumerate().for_each(|(blk, oc)| {
             let i0 = blk * CHUNK;
-            for (t, rv) in rc.iter_mut().enumerate() {
+            for (t, o) in oc.iter_mut().enumerate() {
                 let i = i0 + t;
                 let k = self.cells[i] as usize;
                 let (v, _) = self.row(k, 0, &[], x);
-                *rv = b[i] - self.st.d[k] * x[i] + v;
+                *o = f(i, self.st.d[k] * x[i], v);
             }
         });
     }
 
+    /// [`Graph::residual`] on the finest level.
+    pub(super) fn residual(&self, x: &[f64], b: &[f64], r: &mut [f64]) {
+        self.map_rows(x, r, |i, dx, v| b[i] - dx + v);
+    }
+
     /// `y = A x` on the finest level.
     pub(super) fn product(&self, x: &[f64], y: &mut [f64]) {
-        y.par_chunks_mut(CHUNK).enumerate().for_each(|(blk, yc)| {
-            let i0 = blk * CHUNK;
-            for (t, yv) in yc.iter_mut().enumerate() {
-                let i = i0 + t;
-                let k = self.cells[i] as usize;
-                let (v, _) = self.row(k, 0, &[], x);
-                *yv = self.st.d[k] * x[i] - v;
-            }
-        });
+        self.map_rows(x, y, |_, dx, v| dx - v);
     }
 
     /// [`Graph::smooth`] on the finest level.
