@@ -127,10 +127,15 @@ impl Factor {
             }
         }
         let m = cells.len();
+        let t0 = std::time::Instant::now();
         let (col_ptr, row_idx, vals) = lower_csc(st, &index, &cells);
         let pattern = SymbolicSparseColMat::new_checked(m, m, col_ptr, None, row_idx);
         let a = SparseColMat::new(pattern, vals);
+        let t_matrix = cg::secs(t0);
+        let t0 = std::time::Instant::now();
         let fwd = ordering(st, &index, m);
+        let t_order = cg::secs(t0);
+        let t0 = std::time::Instant::now();
         let mut inv = vec![0usize; m];
         for (new, &old) in fwd.iter().enumerate() {
             inv[old] = new;
@@ -143,6 +148,8 @@ impl Factor {
             Default::default(),
         )
         .map_err(failed)?;
+        let t_symbolic = cg::secs(t0);
+        let t0 = std::time::Instant::now();
         let par = Par::Seq;
         let scratch = symbolic.factorize_numeric_llt_scratch::<f64>(par, Default::default());
         let need = factor_bytes(symbolic.len_val(), scratch.size_bytes());
@@ -181,6 +188,14 @@ impl Factor {
         }
         let solve_buf = MemBuffer::try_new(symbolic.solve_in_place_scratch::<f64>(2, par))
             .map_err(|_| failed("out of memory"))?;
+        if cg::profiling() {
+            eprintln!(
+                "factor: {m} unknowns, {} entries; matrix {t_matrix:.3} s, order {t_order:.3} s, \
+                 symbolic {t_symbolic:.3} s, numeric {:.3} s",
+                symbolic.len_val(),
+                cg::secs(t0)
+            );
+        }
         Ok(Factor {
             work: vec![0.0; 2 * cells.len()],
             cells,
