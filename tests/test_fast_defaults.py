@@ -189,6 +189,21 @@ def test_warm_sweep_resumes_byte_identically(tmp_path, surface, default_sweep):
     assert again.csv_text() == full.csv_text()
 
 
+def test_checkpoint_of_another_solve_tolerance_is_refused(tmp_path, surface, monkeypatch):
+    """A checkpoint written with another sweep tolerance (an older leakpath's 1e-10) is
+    refused, naming the parameter, rather than mixed with levels solved to this one."""
+    import leakpath._sweep as sweep_module
+    from leakpath import CheckpointMismatch
+
+    ck = tmp_path / "ck"
+    with monkeypatch.context() as m:
+        m.setattr(sweep_module, "SOLVE_TOL", 1e-10)
+        old = sweep(surface, levels=2, checkpoint_dir=ck)
+    assert old.parameters["solve_tol"] == 1e-10
+    with pytest.raises(CheckpointMismatch, match="solve_tol"):
+        sweep(surface, levels=2, checkpoint_dir=ck)
+
+
 def _tamper(path, edit):
     data = json.loads(path.read_text())
     edit(data)
