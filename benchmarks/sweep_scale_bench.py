@@ -188,6 +188,11 @@ def main() -> None:
         action="store_true",
         help="one sweep with the flow per size, timing each step per level (wrapped timers)",
     )
+    ap.add_argument(
+        "--no-flow",
+        action="store_true",
+        help="only the sweeps without the flow (with --profile: profile one without the flow)",
+    )
     a = ap.parse_args()
     for n in a.sizes:
         if a.kind == "rmd" and 2 ** round(math.log2(n - 1)) + 1 != n:
@@ -198,10 +203,12 @@ def main() -> None:
     import leakpath
 
     load_before = os.getloadavg()
+    no_flow_flag = " --no-flow" if a.no_flow and not a.profile else ""
     lines = [
         f"## Run: `python benchmarks/sweep_scale_bench.py --sizes "
         f"{' '.join(map(str, a.sizes))} --kind {a.kind} --levels {a.levels} "
-        f"--repeats {a.repeats}` ({time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())})",
+        f"--repeats {a.repeats}{no_flow_flag}` "
+        f"({time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())})",
         "",
         f"- machine: {platform.processor() or platform.machine()}, {os.cpu_count()} logical "
         f"cores, {platform.system()} {platform.release()}; load average before: "
@@ -218,24 +225,35 @@ def main() -> None:
     if a.profile:
         lines = lines[:-3] + [""]
         lines[0] = lines[0].replace("` (", " --profile` (")
+        if a.no_flow:
+            lines[0] = lines[0].replace("--profile`", "--profile --no-flow`")
         for n in a.sizes:
-            res = run_child(a.kind, n, a.levels, True, profile=True)
+            res = run_child(a.kind, n, a.levels, not a.no_flow, profile=True)
             table = profile_table(n, a.levels, res)
             lines += table + [""]
             print("\n".join(table), flush=True)
     for n in [] if a.profile else a.sizes:
-        with_flow = [run_child(a.kind, n, a.levels, True) for _ in range(a.repeats)]
+        with_flow = [
+            run_child(a.kind, n, a.levels, True) for _ in range(0 if a.no_flow else a.repeats)
+        ]
         without = [run_child(a.kind, n, a.levels, False) for _ in range(a.repeats)]
-        tf = statistics.median(r["seconds"] for r in with_flow)
         tc = statistics.median(r["seconds"] for r in without)
-        cf = statistics.median(r["cpu_seconds"] for r in with_flow)
         cc = statistics.median(r["cpu_seconds"] for r in without)
-        peak = max(r["peak_mib"] for r in with_flow)
+        if with_flow:
+            tf = statistics.median(r["seconds"] for r in with_flow)
+            cf = statistics.median(r["cpu_seconds"] for r in with_flow)
+            peak = max(r["peak_mib"] for r in with_flow)
+            flow_cells = (
+                f"{tf:.1f} | {cf:.1f} | {tc:.1f} | {cc:.1f} | {(tf - tc) / tf:.0%} | {peak:.0f}"
+            )
+            first = with_flow[0]
+        else:  # --no-flow: the peak RSS column is the sweep's without the flow
+            peak = max(r["peak_mib"] for r in without)
+            flow_cells = f" | | {tc:.1f} | {cc:.1f} | | {peak:.0f} (no flow)"
+            first = without[0]
         row = (
-            f"| {n}² | {a.levels + 1} | {tf:.1f} | {cf:.1f} | {tc:.1f} | {cc:.1f} | "
-            f"{(tf - tc) / tf:.0%} | "
-            f"{peak:.0f} | {with_flow[0].get('percolating_levels', '')} | "
-            f"{', '.join(with_flow[0]['solvers'])} |"
+            f"| {n}² | {a.levels + 1} | {flow_cells} | "
+            f"{first.get('percolating_levels', '')} | {', '.join(first['solvers'])} |"
         )
         lines.append(row)
         print(row, flush=True)
