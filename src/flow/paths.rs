@@ -92,7 +92,10 @@ pub(super) fn split_direct(
 ) -> DirectAnswer {
     let n = b_in.len();
     a.lo = (vec![0.0; n], vec![0.0; n]);
-    for _ in 0..DIRECT_SPLIT {
+    for step in 0..DIRECT_SPLIT {
+        if cg::profiling() {
+            eprintln!("flow: refinement step {} in two doubles", step + 1);
+        }
         let before = (a.rel_x, a.rel_psi);
         f.correct_pair(&a.r_x, &a.r_psi, &mut a.lo.0, &mut a.lo.1);
         st.residual_split(&a.x, &a.lo.0, b_in, &mut a.r_x);

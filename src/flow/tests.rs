@@ -884,6 +884,63 @@ fn the_order_is_a_permutation_of_the_unknowns_with_and_without_blocks() {
     }
 }
 
+/// The nested dissection orders every unknown once, on thin and square grids, open and with
+/// about a third of the cells closed, with and without wrap; and a mostly open grid above
+/// its size threshold (ordered by it) gives the multigrid's flow rate.
+#[test]
+fn the_nested_dissection_is_a_permutation_and_gives_the_flow() {
+    for &(ny, nx) in &[
+        (1usize, 5usize),
+        (2, 40),
+        (3, 3),
+        (40, 1),
+        (77, 130),
+        (200, 200),
+    ] {
+        for closed in [0.0, 0.35] {
+            for periodic in [false, true] {
+                let c: Vec<f64> = lcg((ny * 1000 + nx) as u64, ny * nx)
+                    .into_iter()
+                    .map(|u| if u < closed { 0.0 } else { u })
+                    .collect();
+                let (st, _) = assemble::fine_stencil(&c, ny, nx, periodic);
+                let mut index = vec![usize::MAX; ny * nx];
+                let mut m = 0;
+                for (k, slot) in index.iter_mut().enumerate() {
+                    if st.active[k] {
+                        *slot = m;
+                        m += 1;
+                    }
+                }
+                let mut order = direct::nd_order(&st, &index, m);
+                assert_eq!(order.len(), m, "{ny}x{nx} periodic={periodic}");
+                order.sort_unstable();
+                assert!(order.iter().enumerate().all(|(q, &u)| q == u));
+            }
+        }
+    }
+    let (ny, nx) = (300, 300);
+    let gap: Vec<f64> = lcg(5, ny * nx)
+        .into_iter()
+        .map(|u| if u < 0.1 { 0.0 } else { 0.2 + u })
+        .collect();
+    for periodic in [false, true] {
+        let pr = problem(&gap, ny, nx, 0, periodic);
+        let direct = solve(&pr, &Options::default()).unwrap();
+        assert_eq!(direct.solver, "cholesky");
+        let mg = solve(
+            &pr,
+            &Options {
+                solver: Solver::Multigrid,
+                ..Options::default()
+            },
+        )
+        .unwrap();
+        let rel = (direct.flow_rate - mg.flow_rate).abs() / mg.flow_rate;
+        assert!(rel < 1e-9, "{} {} {rel:e}", direct.flow_rate, mg.flow_rate);
+    }
+}
+
 /// A column of wide cells with two necks: the wide cells between them are joined to the rest
 /// only through faces `g³ ~ 1e-15` of their own, which the rounded diagonal of the assembled
 /// matrix loses. The rate is the exact series resistance (a sum of positive terms).
