@@ -247,6 +247,7 @@ def flow(
     gas_constant: float | None = None,
     temperature: float | None = None,
     threads: int | None = None,
+    _analysis: _core.FlowAnalysis | None = None,
 ) -> Flow:
     """Steady Reynolds flow through the gap (module docstring; docs/flow.md).
 
@@ -442,6 +443,7 @@ def flow(
         solver=solver,
         threads=None if threads is None else int(threads),
         labels=labels,
+        analysis=_analysis,
     )
     conductance = float(res.conductance)
     permeability = float(res.permeability)

@@ -122,8 +122,14 @@ pub(super) fn solve_axis0(
     let factor = if n_unknowns == 0 || opts.solver == Solver::Multigrid || hopeless {
         None
     } else {
-        match direct::Factor::new(&fine, factor_room) {
-            Ok(f) => Some(Ok(f)),
+        let kept = opts.analysis.filter(|k| k.applies(n));
+        match direct::Factor::new_reusing(&fine, factor_room, kept.and_then(|k| k.get()).as_ref()) {
+            Ok(f) => {
+                if let Some(k) = kept {
+                    k.keep(f.analysis(), f.reused());
+                }
+                Some(Ok(f))
+            }
             Err(Error::TooLarge { .. }) if opts.solver == Solver::Auto => None,
             Err(e @ Error::NotConverged { .. }) => Some(Err(e)),
             Err(e) => return Err(e),

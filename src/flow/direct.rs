@@ -57,6 +57,7 @@ use faer::sparse::linalg::cholesky::{
 };
 use faer::sparse::{SparseColMat, SymbolicSparseColMat, SymbolicSparseColMatRef};
 use faer::{Conj, Mat, Par, Side};
+use std::sync::Arc;
 
 use super::assemble::Stencil;
 use super::cg;
@@ -106,16 +107,61 @@ fn failed(what: impl std::fmt::Display) -> Error {
     }
 }
 
-/// The Cholesky factor of the operator on its active cells.
-pub struct Factor {
+/// The ordering and symbolic analysis of a factor: the grid cells it has unknowns for and
+/// the structure of the factor of the operator on them (its couplings along every grid face
+/// between two of them). A later operator on the same grid whose active cells are among
+/// them is factored on it without a new analysis ([`Factor::new_reusing`]): its other cells
+/// get identity rows and no couplings, whose factor entries are exact zeros.
+pub struct Analysis {
+    ny: usize,
+    nx: usize,
+    periodic: bool,
     /// Grid cell of each unknown (cell order).
     cells: Vec<usize>,
     symbolic: SymbolicCholesky<usize>,
+}
+
+impl Analysis {
+    /// Unknowns of the analysis.
+    pub fn unknowns(&self) -> usize {
+        self.cells.len()
+    }
+
+    /// Entries of a factor on this analysis.
+    pub fn entries(&self) -> usize {
+        self.symbolic.len_val()
+    }
+
+    /// Whether an operator `st` with `active` unknowns can be factored on this analysis:
+    /// (on the same grid and wrap) at least [`REUSE_FRACTION`] of its unknowns, all its
+    /// active cells among them (`index`: grid cell → unknown of the analysis).
+    fn fits(&self, st: &Stencil, index: &[usize], active: usize) -> bool {
+        active as f64 >= REUSE_FRACTION * self.cells.len() as f64
+            && st
+                .active
+                .iter()
+                .zip(index)
+                .all(|(&on, &q)| !on || q != usize::MAX)
+    }
+}
+
+/// A kept [`Analysis`] is used for an operator with at least this fraction of its unknowns
+/// (fewer: the factor on it costs more than a new analysis and a smaller factor).
+pub const REUSE_FRACTION: f64 = 0.95;
+
+/// The Cholesky factor of the operator on its active cells.
+pub struct Factor {
+    analysis: Arc<Analysis>,
+    /// Whether each unknown of the analysis is an active cell of the factored operator
+    /// (`None`: all are).
+    live: Option<Vec<bool>>,
     values: Vec<f64>,
     /// Scratch of one solve.
     solve_buf: MemBuffer,
     /// Two interleaved columns in the factor's order ([`supernodal_solve_pair`]).
     work: Vec<f64>,
+    /// Whether the analysis was a kept one.
+    reused: bool,
 }
 
 /// Bytes of the values of a factor with `entries` entries, its numeric scratch `scratch`
@@ -128,39 +174,92 @@ impl Factor {
     /// Orders, analyses and factors `st` on its active cells. With `memory_limit`, refuses
     /// with [`Error::TooLarge`] after the symbolic analysis when the factor would need more.
     pub fn new(st: &Stencil, memory_limit: Option<u64>) -> Result<Self> {
-        let (ny, nx) = (st.ny, st.nx);
-        let n = ny * nx;
-        let mut index = vec![usize::MAX; n];
-        let mut cells = Vec::new();
-        for (k, slot) in index.iter_mut().enumerate() {
-            if st.active[k] {
-                *slot = cells.len();
-                cells.push(k);
-            }
-        }
-        let m = cells.len();
+        Self::new_reusing(st, memory_limit, None)
+    }
+
+    /// [`Factor::new`] on `kept` when it fits `st` ([`REUSE_FRACTION`], the active cells
+    /// among its unknowns): no ordering nor symbolic analysis, the factor's values only.
+    /// [`Factor::analysis`] gives the analysis used, to keep for the next operator.
+    pub fn new_reusing(
+        st: &Stencil,
+        memory_limit: Option<u64>,
+        kept: Option<&Arc<Analysis>>,
+    ) -> Result<Self> {
+        let n = st.ny * st.nx;
         let t0 = std::time::Instant::now();
-        let (col_ptr, row_idx, vals) = lower_csc(st, &index, &cells);
+        let active = st.active.iter().filter(|&&on| on).count();
+        let mut index = vec![usize::MAX; n];
+        let same_grid =
+            |a: &&Arc<Analysis>| (a.ny, a.nx, a.periodic) == (st.ny, st.nx, st.periodic);
+        let reuse = kept.filter(same_grid).and_then(|a| {
+            for (q, &k) in a.cells.iter().enumerate() {
+                index[k] = q;
+            }
+            if a.fits(st, &index, active) {
+                Some(a.clone())
+            } else {
+                for &k in &a.cells {
+                    index[k] = usize::MAX;
+                }
+                None
+            }
+        });
+        let cells: Vec<usize> = match &reuse {
+            Some(_) => Vec::new(),
+            None => {
+                let mut cells = Vec::with_capacity(active);
+                for (k, slot) in index.iter_mut().enumerate() {
+                    if st.active[k] {
+                        *slot = cells.len();
+                        cells.push(k);
+                    }
+                }
+                cells
+            }
+        };
+        let on = match &reuse {
+            Some(a) => &a.cells,
+            None => &cells,
+        };
+        let m = on.len();
+        let (col_ptr, row_idx, vals) = lower_csc(st, &index, on);
         let pattern = SymbolicSparseColMat::new_checked(m, m, col_ptr, None, row_idx);
         let a = SparseColMat::new(pattern, vals);
         let t_matrix = cg::secs(t0);
-        let t0 = std::time::Instant::now();
-        let fwd = ordering(st, &index, m);
-        let t_order = cg::secs(t0);
-        let t0 = std::time::Instant::now();
-        let mut inv = vec![0usize; m];
-        for (new, &old) in fwd.iter().enumerate() {
-            inv[old] = new;
-        }
-        let perm = faer::perm::PermRef::new_checked(&fwd, &inv, m);
-        let symbolic = factorize_symbolic_cholesky(
-            a.symbolic(),
-            Side::Lower,
-            SymmetricOrdering::Custom(perm),
-            Default::default(),
-        )
-        .map_err(failed)?;
-        let t_symbolic = cg::secs(t0);
+        let (mut t_order, mut t_symbolic) = (0.0, 0.0);
+        let reused = reuse.is_some();
+        let analysis = match reuse {
+            Some(an) => an,
+            None => {
+                let t0 = std::time::Instant::now();
+                let fwd = ordering(st, &index, m);
+                t_order = cg::secs(t0);
+                let t0 = std::time::Instant::now();
+                let mut inv = vec![0usize; m];
+                for (new, &old) in fwd.iter().enumerate() {
+                    inv[old] = new;
+                }
+                let perm = faer::perm::PermRef::new_checked(&fwd, &inv, m);
+                let symbolic = factorize_symbolic_cholesky(
+                    a.symbolic(),
+                    Side::Lower,
+                    SymmetricOrdering::Custom(perm),
+                    Default::default(),
+                )
+                .map_err(failed)?;
+                t_symbolic = cg::secs(t0);
+                Arc::new(Analysis {
+                    ny: st.ny,
+                    nx: st.nx,
+                    periodic: st.periodic,
+                    cells,
+                    symbolic,
+                })
+            }
+        };
+        drop(index);
+        let live = reused.then(|| analysis.cells.iter().map(|&k| st.active[k]).collect());
+        let symbolic = &analysis.symbolic;
         let t0 = std::time::Instant::now();
         let par = Par::Seq;
         let scratch = symbolic.factorize_numeric_llt_scratch::<f64>(par, Default::default());
@@ -224,19 +323,35 @@ impl Factor {
                 );
             }
             eprintln!(
-                "factor: {m} unknowns, {} entries; matrix {t_matrix:.3} s, order {t_order:.3} s, \
+                "factor: {m} unknowns{}, {} entries; matrix {t_matrix:.3} s, order {t_order:.3} s, \
                  symbolic {t_symbolic:.3} s, numeric {:.3} s",
+                if reused {
+                    format!(" (kept analysis, {active} active)")
+                } else {
+                    String::new()
+                },
                 symbolic.len_val(),
                 cg::secs(t0)
             );
         }
         Ok(Factor {
-            work: vec![0.0; 2 * cells.len()],
-            cells,
-            symbolic,
+            work: vec![0.0; 2 * m],
+            analysis,
+            live,
             values,
             solve_buf,
+            reused,
         })
+    }
+
+    /// The ordering and symbolic analysis this factor was computed on.
+    pub fn analysis(&self) -> &Arc<Analysis> {
+        &self.analysis
+    }
+
+    /// Whether the factor was computed on a kept analysis ([`Factor::new_reusing`]).
+    pub fn reused(&self) -> bool {
+        self.reused
     }
 
     /// Entries of the factor.
@@ -245,27 +360,35 @@ impl Factor {
     }
 
     /// `x = A⁻¹ b` (or `x += A⁻¹ b` with `add`) on the active cells for each pair `(b, x)`
-    /// of `cols`, all columns in one pass over the factor.
+    /// of `cols`, all columns in one pass over the factor (`b` read and `x` written on the
+    /// active cells only: the other unknowns of a kept analysis are 0).
     fn solve_cells(&mut self, cols: &mut [(&[f64], &mut [f64])], add: bool) {
-        let m = self.cells.len();
+        let an = &*self.analysis;
+        let (cells, symbolic) = (&an.cells, &an.symbolic);
+        let live = |q: usize| self.live.as_ref().is_none_or(|l| l[q]);
+        let m = cells.len();
         if m == 0 {
             return;
         }
         if let (SymbolicCholeskyRaw::Supernodal(sn), 2, Some(perm)) =
-            (self.symbolic.raw(), cols.len(), self.symbolic.perm())
+            (symbolic.raw(), cols.len(), symbolic.perm())
         {
             // Both columns interleaved, in the factor's order: `w[2p + c]` is column `c` at
             // position `p`, whose cell is `cells[fwd[p]]`.
             let fwd = perm.arrays().0;
             let w = &mut self.work;
             for (p, &q) in fwd.iter().enumerate() {
-                let k = self.cells[q];
-                w[2 * p] = cols[0].0[k];
-                w[2 * p + 1] = cols[1].0[k];
+                let k = cells[q];
+                let on = live(q);
+                w[2 * p] = if on { cols[0].0[k] } else { 0.0 };
+                w[2 * p + 1] = if on { cols[1].0[k] } else { 0.0 };
             }
             supernodal_solve_pair(sn, &self.values, w);
             for (p, &q) in fwd.iter().enumerate() {
-                let k = self.cells[q];
+                if !live(q) {
+                    continue;
+                }
+                let k = cells[q];
                 if add {
                     cols[0].1[k] += w[2 * p];
                     cols[1].1[k] += w[2 * p + 1];
@@ -276,8 +399,14 @@ impl Factor {
             }
             return;
         }
-        let mut sol = Mat::<f64>::from_fn(m, cols.len(), |r, c| cols[c].0[self.cells[r]]);
-        let llt = LltRef::<'_, usize, f64>::new(&self.symbolic, &self.values);
+        let mut sol = Mat::<f64>::from_fn(m, cols.len(), |r, c| {
+            if live(r) {
+                cols[c].0[cells[r]]
+            } else {
+                0.0
+            }
+        });
+        let llt = LltRef::<'_, usize, f64>::new(symbolic, &self.values);
         llt.solve_in_place_with_conj(
             Conj::No,
             sol.as_mut(),
@@ -285,7 +414,10 @@ impl Factor {
             MemStack::new(&mut self.solve_buf),
         );
         for (c, (_, x)) in cols.iter_mut().enumerate() {
-            for (r, &k) in self.cells.iter().enumerate() {
+            for (r, &k) in cells.iter().enumerate() {
+                if !live(r) {
+                    continue;
+                }
                 if add {
                     x[k] += sol[(r, c)];
                 } else {
@@ -402,18 +534,45 @@ fn supernodal_solve_pair(sn: &SymbolicSupernodalCholesky<usize>, values: &[f64],
     }
 }
 
-/// The lower triangle (row ≥ column) of the operator on the unknowns, by columns, rows
-/// ascending: each unknown's diagonal, then its neighbours of larger index.
+/// The lower triangle (row ≥ column) of the operator on the unknowns `cells` (`index`:
+/// grid cell → unknown), by columns, rows ascending: each unknown's diagonal, then its
+/// neighbours of larger index along every grid face between two unknowns, with the face's
+/// conductance (0 on a closed face). An unknown on a cell that is not active (a kept
+/// analysis's) has diagonal 1 and no couplings (its faces are closed).
 fn lower_csc(st: &Stencil, index: &[usize], cells: &[usize]) -> (Vec<usize>, Vec<usize>, Vec<f64>) {
     let m = cells.len();
+    let (ny, nx) = (st.ny, st.nx);
     let mut col_ptr = Vec::with_capacity(m + 1);
     let mut row_idx = Vec::with_capacity(3 * m);
     let mut vals = Vec::with_capacity(3 * m);
     col_ptr.push(0);
     for (q, &k) in cells.iter().enumerate() {
+        let (i, j) = (k / nx, k % nx);
+        let base = i * nx;
+        // Every grid face of `k`: (neighbour, conductance).
+        let mut faces: [(usize, f64); 4] = [(usize::MAX, 0.0); 4];
+        let mut nf = 0;
+        let mut face = |l: usize, c: f64| {
+            faces[nf] = (l, c);
+            nf += 1;
+        };
+        if j + 1 < nx {
+            face(k + 1, st.e[k]);
+        } else if st.periodic && nx > 1 {
+            face(base, st.e[k]);
+        }
+        if let Some(wj) = st.west(j) {
+            face(base + wj, st.e[base + wj]);
+        }
+        if i + 1 < ny {
+            face(k + nx, st.s[k]);
+        }
+        if i > 0 {
+            face(k - nx, st.s[k - nx]);
+        }
         let mut below: [(usize, f64); 4] = [(usize::MAX, 0.0); 4];
         let mut nb = 0;
-        st.for_each_face(k, |l, c| {
+        for &(l, c) in &faces[..nf] {
             let t = index[l];
             if t != usize::MAX && t > q {
                 // The two faces of a 2-wide periodic row join the same pair: add them.
@@ -424,13 +583,14 @@ fn lower_csc(st: &Stencil, index: &[usize], cells: &[usize]) -> (Vec<usize>, Vec
                     nb += 1;
                 }
             }
-        });
+        }
         below[..nb].sort_unstable_by_key(|e| e.0);
         row_idx.push(q);
-        vals.push(st.d[k]);
+        vals.push(if st.active[k] { st.d[k] } else { 1.0 });
         for &(t, v) in &below[..nb] {
             row_idx.push(t);
-            vals.push(v);
+            // `-0.0 → 0.0`: a closed face stores a plain zero.
+            vals.push(v + 0.0);
         }
         col_ptr.push(row_idx.len());
     }
@@ -787,7 +947,7 @@ mod tests {
             .collect();
         let mut f = Factor::new(&st, None).unwrap();
         assert!(matches!(
-            f.symbolic.raw(),
+            f.analysis.symbolic.raw(),
             SymbolicCholeskyRaw::Supernodal(_)
         ));
         let mut r = vec![0.0; n];
@@ -797,9 +957,9 @@ mod tests {
         };
         // faer's solve of each column on its own.
         let general = |f: &mut Factor, b: &[f64]| {
-            let m = f.cells.len();
-            let mut sol = Mat::<f64>::from_fn(m, 1, |q, _| b[f.cells[q]]);
-            let llt = LltRef::<'_, usize, f64>::new(&f.symbolic, &f.values);
+            let m = f.analysis.cells.len();
+            let mut sol = Mat::<f64>::from_fn(m, 1, |q, _| b[f.analysis.cells[q]]);
+            let llt = LltRef::<'_, usize, f64>::new(&f.analysis.symbolic, &f.values);
             llt.solve_in_place_with_conj(
                 Conj::No,
                 sol.as_mut(),
@@ -807,7 +967,7 @@ mod tests {
                 MemStack::new(&mut f.solve_buf),
             );
             let mut x = vec![0.0; n];
-            for (q, &k) in f.cells.iter().enumerate() {
+            for (q, &k) in f.analysis.cells.iter().enumerate() {
                 x[k] = sol[(q, 0)];
             }
             x

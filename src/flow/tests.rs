@@ -941,6 +941,39 @@ fn the_nested_dissection_is_a_permutation_and_gives_the_flow() {
     }
 }
 
+/// A kept analysis: a gap closing in steps (`g − kδ`), each step solved on the analysis of
+/// the first while its unknowns stay among them and above the reuse fraction; the rates as
+/// a fresh analysis's to 1e-10, a different grid or a more open gap analysed afresh.
+#[test]
+fn kept_analysis_gives_the_fresh_rate() {
+    let (ny, nx) = (70, 90);
+    let base: Vec<f64> = lcg(21, ny * nx).into_iter().map(|u| 0.05 + u).collect();
+    let kept = kept::KeptAnalysis::new(0);
+    let opts = Options {
+        analysis: Some(&kept),
+        ..Options::default()
+    };
+    for k in 0..4 {
+        let gap: Vec<f64> = base
+            .iter()
+            .map(|g| (g - 0.01 * k as f64).max(0.0))
+            .collect();
+        let pr = problem(&gap, ny, nx, 0, true);
+        let a = solve(&pr, &opts).unwrap();
+        let f = solve(&pr, &Options::default()).unwrap();
+        assert_eq!(a.n_unknowns, f.n_unknowns);
+        let rel = (a.flow_rate - f.flow_rate).abs() / f.flow_rate;
+        assert!(rel <= 1e-10, "step {k}: {rel:e}");
+    }
+    assert_eq!(kept.made() + kept.reused(), 4);
+    assert!(kept.reused() >= 1, "{} {}", kept.made(), kept.reused());
+    // Another grid: a new analysis, no out-of-range access.
+    let made = kept.made();
+    let pr = problem(&base[..(ny - 1) * nx], ny - 1, nx, 0, true);
+    solve(&pr, &opts).unwrap();
+    assert_eq!(kept.made(), made + 1);
+}
+
 /// A column of wide cells with two necks: the wide cells between them are joined to the rest
 /// only through faces `g³ ~ 1e-15` of their own, which the rounded diagonal of the assembled
 /// matrix loses. The rate is the exact series resistance (a sum of positive terms).
