@@ -57,7 +57,11 @@ pub(super) fn solve_direct(
 ) -> DirectAnswer {
     let n = b_in.len();
     let (mut x, mut psi) = (vec![0.0; n], vec![0.0; n]);
+    let t0 = std::time::Instant::now();
     f.solve_pair(b_in, b_out, &mut x, &mut psi);
+    if cg::profiling() {
+        eprintln!("flow: two-column solve {:.3} s", cg::secs(t0));
+    }
     let (mut r_x, mut r_psi) = (vec![0.0; n], vec![0.0; n]);
     st.residual_compensated(&x, b_in, &mut r_x);
     st.residual_compensated(&psi, b_out, &mut r_psi);
