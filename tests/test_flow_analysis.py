@@ -12,9 +12,15 @@ import pytest
 
 import leakpath
 from leakpath import _core
+from leakpath._flow import kept_analysis
 
 pytest.importorskip("scipy.sparse")
 from test_flow_solver import oracle_rate  # noqa: E402
+
+
+def _kept(kept: _core.FlowAnalysis, gap: np.ndarray, **kwargs) -> leakpath.Flow:
+    with kept_analysis(kept):
+        return leakpath.flow(gap, **kwargs)
 
 
 def _levels(ny: int, nx: int, seed: int, n: int) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -35,7 +41,8 @@ def test_kept_analysis_gives_the_fresh_and_the_oracle_rate(periodic):
     levels = _levels(96, 80, 3, 6)
     kept = _core.FlowAnalysis(min_cells=0)
     for gap, contact in levels:
-        a = leakpath.flow(gap, contact=contact, dx=1.0, periodic=periodic, _analysis=kept)
+        with kept_analysis(kept):
+            a = leakpath.flow(gap, contact=contact, dx=1.0, periodic=periodic)
         f = leakpath.flow(gap, contact=contact, dx=1.0, periodic=periodic)
         assert a.solver == f.solver == "cholesky"
         assert a.n_unknowns == f.n_unknowns
@@ -63,15 +70,15 @@ def test_kept_analysis_is_remade_when_unknowns_are_not_a_subset():
     kept = _core.FlowAnalysis(min_cells=0)
     # The more closed gap first, then the more open one: its unknowns are not among the
     # kept analysis's, so a new analysis is made.
-    leakpath.flow(g1, contact=c1, dx=1.0, _analysis=kept)
-    a = leakpath.flow(g0, contact=c0, dx=1.0, _analysis=kept)
+    _kept(kept, g1, contact=c1, dx=1.0)
+    a = _kept(kept, g0, contact=c0, dx=1.0)
     assert (kept.analyses, kept.reuses) == (2, 0)
     assert abs(a.flow_rate - oracle_rate(g0, c0)) <= 1e-9 * a.flow_rate
     # A different grid: a new analysis too.
-    leakpath.flow(g0[:, :60], contact=c0[:, :60], dx=1.0, _analysis=kept)
+    _kept(kept, g0[:, :60], contact=c0[:, :60], dx=1.0)
     assert (kept.analyses, kept.reuses) == (3, 0)
     # The same gap again: reused, the same rate to round-off.
-    b = leakpath.flow(g0[:, :60], contact=c0[:, :60], dx=1.0, _analysis=kept)
+    b = _kept(kept, g0[:, :60], contact=c0[:, :60], dx=1.0)
     assert (kept.analyses, kept.reuses) == (3, 1)
     assert abs(b.flow_rate - oracle_rate(g0[:, :60], c0[:, :60])) <= 1e-9 * b.flow_rate
 
@@ -79,7 +86,7 @@ def test_kept_analysis_is_remade_when_unknowns_are_not_a_subset():
 def test_small_grids_do_not_use_the_kept_analysis_by_default():
     gap, contact = _levels(64, 64, 5, 1)[0]
     kept = _core.FlowAnalysis()
-    leakpath.flow(gap, contact=contact, dx=1.0, _analysis=kept)
+    _kept(kept, gap, contact=contact, dx=1.0)
     assert (kept.analyses, kept.reuses, kept.unknowns) == (0, 0, 0)
     assert "FlowAnalysis(" in repr(kept)
 
@@ -91,7 +98,7 @@ def test_kept_analysis_is_the_same_bits_on_one_and_two_threads():
         kept = _core.FlowAnalysis(min_cells=0)
         rates.append(
             [
-                leakpath.flow(g, contact=c, dx=1.0, threads=threads, _analysis=kept).flow_rate
+                _kept(kept, g, contact=c, dx=1.0, threads=threads).flow_rate
                 for g, c in levels
             ]
         )

@@ -44,7 +44,7 @@ from typing import Any
 import numpy as np
 
 from . import _core, _validate
-from ._flow import flow
+from ._flow import flow, kept_analysis
 from .errors import InvalidArgumentError
 
 __all__ = [
@@ -124,7 +124,8 @@ def _timed_columns(
     ``flow_axis`` with ``η = Δp = 1``, on the factor analysis kept in ``analysis`` when it
     fits (docs/flow.md)."""
     t0 = time.perf_counter()
-    f = flow(state, axis=flow_axis, threads=threads, _analysis=analysis)
+    with kept_analysis(analysis):
+        f = flow(state, axis=flow_axis, threads=threads)
     cols = {"Q": float(f.flow_rate), "K": float(f.permeability)}
     return cols, time.perf_counter() - t0
 
