@@ -103,3 +103,16 @@ def test_kept_analysis_is_the_same_bits_on_one_and_two_threads():
             ]
         )
     assert rates[0] == rates[1]
+
+
+def test_nested_dissection_is_the_same_bits_on_one_and_two_threads():
+    # 400² cells, 95 % open: ordered by nested dissection, its halves in parallel.
+    gap, contact = _levels(400, 400, 11, 1)[0]
+    contact = contact | (np.random.default_rng(0).random(gap.shape) < 0.05)
+    a, b = (
+        leakpath.flow(gap, contact=contact, dx=1.0, threads=t, periodic=True) for t in (1, 2)
+    )
+    assert a.n_unknowns > 0.6 * gap.size
+    assert a.flow_rate == b.flow_rate
+    assert np.array_equal(a.pressure, b.pressure, equal_nan=True)
+    assert abs(a.flow_rate - a.inlet_flow_rate) <= 1e-9 * a.flow_rate
