@@ -7,8 +7,9 @@ use rayon::prelude::*;
 
 use crate::error::{Error, Result};
 
-/// Whether `LEAKPATH_FLOW_PROFILE` is set: stage timings of the iterative solver are then
-/// printed to standard error (a development aid; no result depends on it).
+/// Whether `LEAKPATH_FLOW_PROFILE` is set: stage timings of the flow solvers (the factor's
+/// analysis and factorisation, the multigrid's setup and cycles) are then printed to standard
+/// error (a development aid; no result depends on it).
 pub(crate) fn profiling() -> bool {
     static ON: OnceLock<bool> = OnceLock::new();
     *ON.get_or_init(|| std::env::var_os("LEAKPATH_FLOW_PROFILE").is_some())
