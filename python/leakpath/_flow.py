@@ -31,6 +31,9 @@ hydraulic aperture ``(12 K)^{1/3}`` (``g`` for plates).
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
+from contextlib import contextmanager
+from contextvars import ContextVar
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -226,6 +229,25 @@ def _representable(name: str, what: str, scaled: tuple[float, int], formula: str
 
 def _is_state(obj: Any) -> bool:
     return all(hasattr(obj, name) for name in ("gap", "contact", "dx"))
+
+
+#: The factor analysis that :func:`flow` passes to the solver in this context (private:
+#: :func:`kept_analysis`).
+_KEPT_ANALYSIS: ContextVar[_core.FlowAnalysis | None] = ContextVar(
+    "leakpath_kept_flow_analysis", default=None
+)
+
+
+@contextmanager
+def kept_analysis(analysis: _core.FlowAnalysis | None) -> Iterator[None]:
+    """Within the block (this thread and context), :func:`flow` factors on the ordering and
+    symbolic analysis kept in ``analysis`` when it fits and keeps a new one when not
+    (:class:`leakpath._core.FlowAnalysis`; used by :class:`leakpath.leakage.LevelFlows`)."""
+    token = _KEPT_ANALYSIS.set(analysis)
+    try:
+        yield
+    finally:
+        _KEPT_ANALYSIS.reset(token)
 
 
 def flow(
@@ -442,6 +464,7 @@ def flow(
         solver=solver,
         threads=None if threads is None else int(threads),
         labels=labels,
+        analysis=_KEPT_ANALYSIS.get(),
     )
     conductance = float(res.conductance)
     permeability = float(res.permeability)

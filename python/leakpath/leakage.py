@@ -26,7 +26,9 @@ gap alone, and its factorisation runs on one core, so with two or more solver th
 flows run on a background thread (a one-thread pool of their own) while the next contact
 solve runs. The numbers are the same bits as computing them in turn: the flow solver's
 results do not depend on its thread count, and levels with identical gaps (the reference
-and the ``Δ = 0`` row) are solved once.
+and the ``Δ = 0`` row) are solved once. On grids of 2^20 cells and more the levels pass
+the factor's ordering and symbolic analysis on (:class:`leakpath._core.FlowAnalysis`,
+docs/flow.md) and their flows run in submission order.
 """
 
 from __future__ import annotations
@@ -36,13 +38,13 @@ import math
 import time
 from collections import deque
 from collections.abc import Hashable
-from concurrent.futures import Future, ThreadPoolExecutor
+from concurrent.futures import Future, ThreadPoolExecutor, wait
 from typing import Any
 
 import numpy as np
 
 from . import _core, _validate
-from ._flow import flow
+from ._flow import flow, kept_analysis
 from .errors import InvalidArgumentError
 
 __all__ = [
@@ -95,6 +97,10 @@ def flow_axis_for(flow_axis: Any, axis: Any) -> int:
     return _validate.flow_axis(flow_axis, "flow_axis")
 
 
+#: Grids of at least this many cells pass the factor's analysis from level to level
+#: (:class:`leakpath._core.FlowAnalysis`'s default ``min_cells``).
+ANALYSIS_MIN_CELLS = 1 << 20
+
 #: Flows queued or running at most before :meth:`LevelFlows.submit` computes one itself:
 #: bounds the states held when flows are slower than contact solves.
 MAX_PENDING = 3
@@ -109,12 +115,17 @@ def _state_digest(state: Any) -> bytes:
 
 
 def _timed_columns(
-    state: Any, flow_axis: int, threads: int | None
+    state: Any,
+    flow_axis: int,
+    threads: int | None,
+    analysis: _core.FlowAnalysis | None = None,
 ) -> tuple[dict[str, float], float]:
     """``({"Q": …, "K": …}, seconds)`` of :func:`leakpath.flow` on ``state`` along
-    ``flow_axis`` with ``η = Δp = 1``."""
+    ``flow_axis`` with ``η = Δp = 1``, on the factor analysis kept in ``analysis`` when it
+    fits (docs/flow.md)."""
     t0 = time.perf_counter()
-    f = flow(state, axis=flow_axis, threads=threads)
+    with kept_analysis(analysis):
+        f = flow(state, axis=flow_axis, threads=threads)
     cols = {"Q": float(f.flow_rate), "K": float(f.permeability)}
     return cols, time.perf_counter() - t0
 
@@ -131,6 +142,13 @@ class LevelFlows:
     solvers have two or more threads (:func:`leakpath._core.solver_threads`), else in
     :meth:`submit`. A job on the background thread passes ``threads=1`` to its work and
     flow; one run here passes ``None`` (all solver threads).
+
+    The flows share one :class:`leakpath._core.FlowAnalysis`: a level whose unknowns are
+    among an earlier level's is factored on that level's ordering and symbolic analysis
+    (grids of 2^20 cells and more, docs/flow.md). Which analysis a level uses depends on the
+    levels solved before it, so on those grids the flows run strictly in submission order
+    (none is taken over by :meth:`submit` or :meth:`finish`): the same bits with one thread
+    or two.
     """
 
     def __init__(self, flow_axis: int, enabled: bool, background: bool | None = None) -> None:
@@ -145,6 +163,9 @@ class LevelFlows:
         self._jobs: dict[Future[Any], tuple[Any, Any, bool]] = {}  # inputs of queued jobs
         self._seen: set[bytes] = set()  # digests of the states whose flow a job computes
         self._cols: dict[bytes, dict[str, float]] = {}  # their columns, once taken
+        #: The factor analysis the flows pass on from level to level.
+        self.analysis = _core.FlowAnalysis(ANALYSIS_MIN_CELLS) if enabled else None
+        self._in_order = False  # a grid on which the flows share the analysis was seen
 
     def _job(
         self, state: Any, work: Any, solve: bool, threads: int | None
@@ -154,7 +175,7 @@ class LevelFlows:
             return out, {"Q": math.nan, "K": math.nan}, 0.0
         if not solve:  # an identical state's flow: its columns are filled in when taken
             return out, None, 0.0
-        cols, seconds = _timed_columns(state, self.flow_axis, threads)
+        cols, seconds = _timed_columns(state, self.flow_axis, threads, self.analysis)
         return out, cols, seconds
 
     def _here(self, state: Any, work: Any, solve: bool) -> Future[Any]:
@@ -170,6 +191,8 @@ class LevelFlows:
         """Queue the job of ``state`` under ``key``: ``work(threads)`` if given, then the
         flow (once per distinct gap and contact mask)."""
         digest = _state_digest(state) if self.enabled else None
+        if self.enabled and np.size(state.gap) >= ANALYSIS_MIN_CELLS:
+            self._in_order = True
         solve = digest is not None and digest not in self._seen
         if solve:
             self._seen.add(digest)  # type: ignore[arg-type]
@@ -179,12 +202,14 @@ class LevelFlows:
             fut = self._pool.submit(self._job, state, work, solve, 1)
             self._jobs[fut] = (state, work, solve)
         self._queue.append((key, fut, digest))
-        if sum(not f.done() for _, f, _ in self._queue) > MAX_PENDING:
-            self._help_one()
+        if sum(not f.done() for _, f, _ in self._queue) > MAX_PENDING and not self._help_one():
+            wait([next(f for _, f, _ in self._queue if not f.done())])
 
     def _help_one(self) -> bool:
         """Run the newest job not yet started here (the pool's thread takes the oldest);
-        False when every job has started."""
+        False when every job has started, or when the jobs run in order (class docs)."""
+        if self._in_order:
+            return False
         for i in range(len(self._queue) - 1, -1, -1):
             key, fut, digest = self._queue[i]
             if fut.cancel():
@@ -221,6 +246,8 @@ class LevelFlows:
             self._pool.shutdown(wait=True, cancel_futures=True)
         self._queue.clear()
         self._jobs.clear()
+        if self.analysis is not None:
+            self.analysis.clear()
 
 
 def flow_star(row: dict[str, Any], k_ref: float) -> float:

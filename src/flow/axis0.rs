@@ -31,6 +31,7 @@ pub(super) fn solve_axis0(
     given: Option<(Vec<u32>, usize)>,
 ) -> Result<UnitSolution> {
     let n = ny * nx;
+    let t_start = std::time::Instant::now();
     let gref = g.par_iter().cloned().reduce(|| 0.0, f64::max);
     let mut c: Vec<f64> = if gref > 0.0 {
         g.par_iter()
@@ -92,6 +93,13 @@ pub(super) fn solve_axis0(
         .map(|k| if k >= (ny - 1) * nx { 2.0 * c[k] } else { 0.0 })
         .collect();
     let max_iter = opts.max_iter.unwrap_or(DEFAULT_MAX_ITER);
+    let prof = cg::profiling();
+    if prof {
+        eprintln!(
+            "flow: open gaps, labels, stencil {:.3} s",
+            cg::secs(t_start)
+        );
+    }
     let mut iterations = 0;
     let mut levels = 0;
     // Room for the factor: what the limits leave beside the rest of the solve.
@@ -114,8 +122,14 @@ pub(super) fn solve_axis0(
     let factor = if n_unknowns == 0 || opts.solver == Solver::Multigrid || hopeless {
         None
     } else {
-        match direct::Factor::new(&fine, factor_room) {
-            Ok(f) => Some(Ok(f)),
+        let kept = opts.analysis.filter(|k| k.applies(n));
+        match direct::Factor::new_reusing(&fine, factor_room, kept.and_then(|k| k.get()).as_ref()) {
+            Ok(f) => {
+                if let Some(k) = kept {
+                    k.keep(f.analysis(), f.reused());
+                }
+                Some(Ok(f))
+            }
             Err(Error::TooLarge { .. }) if opts.solver == Solver::Auto => None,
             Err(e @ Error::NotConverged { .. }) => Some(Err(e)),
             Err(e) => return Err(e),
@@ -130,12 +144,32 @@ pub(super) fn solve_axis0(
         None => None,
         Some(f) => {
             let trusted = f.ok().and_then(|mut f| {
+                let t0 = std::time::Instant::now();
                 let a = solve_direct(&mut f, &fine, &rhs, &b_out);
-                if trusted(&rhs, &b_out, &a) {
+                let t_solve = cg::secs(t0);
+                let t0 = std::time::Instant::now();
+                let ok = trusted(&rhs, &b_out, &a);
+                if prof {
+                    eprintln!(
+                        "flow: solve and residuals {t_solve:.3} s, checks {:.3} s ({})",
+                        cg::secs(t0),
+                        if ok { "trusted" } else { "refining" }
+                    );
+                }
+                if ok {
                     return Some(a);
                 }
+                let t0 = std::time::Instant::now();
                 let a = split_direct(&mut f, &fine, &rhs, &b_out, a);
-                trusted(&rhs, &b_out, &a).then_some(a)
+                let ok = trusted(&rhs, &b_out, &a);
+                if prof {
+                    eprintln!(
+                        "flow: refinement in two doubles and checks {:.3} s ({})",
+                        cg::secs(t0),
+                        if ok { "trusted" } else { "refused" }
+                    );
+                }
+                ok.then_some(a)
             });
             match trusted {
                 Some(a) => {
@@ -176,6 +210,7 @@ pub(super) fn solve_axis0(
         (mg.into_fine(), x, psi, residual, "multigrid")
     };
     drop(rhs);
+    let t_post = std::time::Instant::now();
     let st = &st;
     // Pressures: solution on spanning cells, reservoir pressure on one-sided clusters.
     let phi: Vec<f64> = (0..n)
@@ -271,6 +306,12 @@ pub(super) fn solve_axis0(
     } else {
         0.0
     };
+    if prof {
+        eprintln!(
+            "flow: pressures, fluxes, conservation {:.3} s",
+            cg::secs(t_post)
+        );
+    }
     if conservation > CONSERVATION_MAX || !conservation.is_finite() {
         return Err(Error::NotConverged {
             iterations,

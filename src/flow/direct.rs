@@ -8,7 +8,19 @@
 //!
 //! # Ordering
 //!
-//! The fill-reducing order is approximate minimum degree (faer's AMD), over 2 × 2 blocks of
+//! On grids from 2^18 cells (513²), and from 2^16 cells (257²) when at least 60 % of the
+//! cells carry unknowns, the order is a geometric nested dissection ([`nd_order`]): each
+//! rectangle cut across its longer side by the row or column with the fewest unknowns
+//! within an eighth of its length from the middle, the two sides ordered first, the cut
+//! last, down to rectangles of 8 cells. Its top cuts become large dense supernodes, which
+//! faer factors with dense kernels near the core's peak: on the mostly open gaps of a
+//! contact sweep (84–100 % open) it needs 1.3–3.7× fewer flops than the minimum-degree
+//! order below (2049², Δ = 0.05 h_s: 1.67e11 against 2.55e11; 1025², Δ = 0.5 h_s: 1.62e10
+//! against 6.3e10) and orders in a few hundredths of the time; whole flows 20–45 % faster
+//! (docs/flow.md). Below those sizes, and on gaps near the percolation threshold at 257²,
+//! the minimum-degree order is faster.
+//!
+//! Otherwise the fill-reducing order is approximate minimum degree (faer's AMD), over 2 × 2 blocks of
 //! cells ([`BLOCK`]) on pieces of up to a million cells (except 20,000 to 100,000), on
 //! pieces of the grid:
 //! the grid is cut in two by its middle row (or, without wrap and wider than tall, its
@@ -45,6 +57,7 @@ use faer::sparse::linalg::cholesky::{
 };
 use faer::sparse::{SparseColMat, SymbolicSparseColMat, SymbolicSparseColMatRef};
 use faer::{Conj, Mat, Par, Side};
+use std::sync::Arc;
 
 use super::assemble::Stencil;
 use super::cg;
@@ -94,16 +107,61 @@ fn failed(what: impl std::fmt::Display) -> Error {
     }
 }
 
-/// The Cholesky factor of the operator on its active cells.
-pub struct Factor {
+/// The ordering and symbolic analysis of a factor: the grid cells it has unknowns for and
+/// the structure of the factor of the operator on them (its couplings along every grid face
+/// between two of them). A later operator on the same grid whose active cells are among
+/// them is factored on it without a new analysis ([`Factor::new_reusing`]): its other cells
+/// get identity rows and no couplings, whose factor entries are exact zeros.
+pub struct Analysis {
+    ny: usize,
+    nx: usize,
+    periodic: bool,
     /// Grid cell of each unknown (cell order).
     cells: Vec<usize>,
     symbolic: SymbolicCholesky<usize>,
+}
+
+impl Analysis {
+    /// Unknowns of the analysis.
+    pub fn unknowns(&self) -> usize {
+        self.cells.len()
+    }
+
+    /// Entries of a factor on this analysis.
+    pub fn entries(&self) -> usize {
+        self.symbolic.len_val()
+    }
+
+    /// Whether an operator `st` with `active` unknowns can be factored on this analysis:
+    /// (on the same grid and wrap) at least [`REUSE_FRACTION`] of its unknowns, all its
+    /// active cells among them (`index`: grid cell → unknown of the analysis).
+    fn fits(&self, st: &Stencil, index: &[usize], active: usize) -> bool {
+        active as f64 >= REUSE_FRACTION * self.cells.len() as f64
+            && st
+                .active
+                .iter()
+                .zip(index)
+                .all(|(&on, &q)| !on || q != usize::MAX)
+    }
+}
+
+/// A kept [`Analysis`] is used for an operator with at least this fraction of its unknowns
+/// (fewer: the factor on it costs more than a new analysis and a smaller factor).
+pub const REUSE_FRACTION: f64 = 0.95;
+
+/// The Cholesky factor of the operator on its active cells.
+pub struct Factor {
+    analysis: Arc<Analysis>,
+    /// Whether each unknown of the analysis is an active cell of the factored operator
+    /// (`None`: all are).
+    live: Option<Vec<bool>>,
     values: Vec<f64>,
     /// Scratch of one solve.
     solve_buf: MemBuffer,
     /// Two interleaved columns in the factor's order ([`supernodal_solve_pair`]).
     work: Vec<f64>,
+    /// Whether the analysis was a kept one.
+    reused: bool,
 }
 
 /// Bytes of the values of a factor with `entries` entries, its numeric scratch `scratch`
@@ -116,39 +174,92 @@ impl Factor {
     /// Orders, analyses and factors `st` on its active cells. With `memory_limit`, refuses
     /// with [`Error::TooLarge`] after the symbolic analysis when the factor would need more.
     pub fn new(st: &Stencil, memory_limit: Option<u64>) -> Result<Self> {
-        let (ny, nx) = (st.ny, st.nx);
-        let n = ny * nx;
-        let mut index = vec![usize::MAX; n];
-        let mut cells = Vec::new();
-        for (k, slot) in index.iter_mut().enumerate() {
-            if st.active[k] {
-                *slot = cells.len();
-                cells.push(k);
-            }
-        }
-        let m = cells.len();
+        Self::new_reusing(st, memory_limit, None)
+    }
+
+    /// [`Factor::new`] on `kept` when it fits `st` ([`REUSE_FRACTION`], the active cells
+    /// among its unknowns): no ordering nor symbolic analysis, the factor's values only.
+    /// [`Factor::analysis`] gives the analysis used, to keep for the next operator.
+    pub fn new_reusing(
+        st: &Stencil,
+        memory_limit: Option<u64>,
+        kept: Option<&Arc<Analysis>>,
+    ) -> Result<Self> {
+        let n = st.ny * st.nx;
         let t0 = std::time::Instant::now();
-        let (col_ptr, row_idx, vals) = lower_csc(st, &index, &cells);
+        let active = st.active.iter().filter(|&&on| on).count();
+        let mut index = vec![usize::MAX; n];
+        let same_grid =
+            |a: &&Arc<Analysis>| (a.ny, a.nx, a.periodic) == (st.ny, st.nx, st.periodic);
+        let reuse = kept.filter(same_grid).and_then(|a| {
+            for (q, &k) in a.cells.iter().enumerate() {
+                index[k] = q;
+            }
+            if a.fits(st, &index, active) {
+                Some(a.clone())
+            } else {
+                for &k in &a.cells {
+                    index[k] = usize::MAX;
+                }
+                None
+            }
+        });
+        let cells: Vec<usize> = match &reuse {
+            Some(_) => Vec::new(),
+            None => {
+                let mut cells = Vec::with_capacity(active);
+                for (k, slot) in index.iter_mut().enumerate() {
+                    if st.active[k] {
+                        *slot = cells.len();
+                        cells.push(k);
+                    }
+                }
+                cells
+            }
+        };
+        let on = match &reuse {
+            Some(a) => &a.cells,
+            None => &cells,
+        };
+        let m = on.len();
+        let (col_ptr, row_idx, vals) = lower_csc(st, &index, on);
         let pattern = SymbolicSparseColMat::new_checked(m, m, col_ptr, None, row_idx);
         let a = SparseColMat::new(pattern, vals);
         let t_matrix = cg::secs(t0);
-        let t0 = std::time::Instant::now();
-        let fwd = ordering(st, &index, m);
-        let t_order = cg::secs(t0);
-        let t0 = std::time::Instant::now();
-        let mut inv = vec![0usize; m];
-        for (new, &old) in fwd.iter().enumerate() {
-            inv[old] = new;
-        }
-        let perm = faer::perm::PermRef::new_checked(&fwd, &inv, m);
-        let symbolic = factorize_symbolic_cholesky(
-            a.symbolic(),
-            Side::Lower,
-            SymmetricOrdering::Custom(perm),
-            Default::default(),
-        )
-        .map_err(failed)?;
-        let t_symbolic = cg::secs(t0);
+        let (mut t_order, mut t_symbolic) = (0.0, 0.0);
+        let reused = reuse.is_some();
+        let analysis = match reuse {
+            Some(an) => an,
+            None => {
+                let t0 = std::time::Instant::now();
+                let fwd = ordering(st, &index, m);
+                t_order = cg::secs(t0);
+                let t0 = std::time::Instant::now();
+                let mut inv = vec![0usize; m];
+                for (new, &old) in fwd.iter().enumerate() {
+                    inv[old] = new;
+                }
+                let perm = faer::perm::PermRef::new_checked(&fwd, &inv, m);
+                let symbolic = factorize_symbolic_cholesky(
+                    a.symbolic(),
+                    Side::Lower,
+                    SymmetricOrdering::Custom(perm),
+                    Default::default(),
+                )
+                .map_err(failed)?;
+                t_symbolic = cg::secs(t0);
+                Arc::new(Analysis {
+                    ny: st.ny,
+                    nx: st.nx,
+                    periodic: st.periodic,
+                    cells,
+                    symbolic,
+                })
+            }
+        };
+        drop(index);
+        let live = reused.then(|| analysis.cells.iter().map(|&k| st.active[k]).collect());
+        let symbolic = &analysis.symbolic;
         let t0 = std::time::Instant::now();
         let par = Par::Seq;
         let scratch = symbolic.factorize_numeric_llt_scratch::<f64>(par, Default::default());
@@ -189,20 +300,58 @@ impl Factor {
         let solve_buf = MemBuffer::try_new(symbolic.solve_in_place_scratch::<f64>(2, par))
             .map_err(|_| failed("out of memory"))?;
         if cg::profiling() {
+            if let SymbolicCholeskyRaw::Supernodal(sn) = symbolic.raw() {
+                let (b, e, rp) = (
+                    sn.supernode_begin(),
+                    sn.supernode_end(),
+                    sn.col_ptr_for_row_idx(),
+                );
+                let mut flops = 0f64;
+                let mut big = 0usize;
+                for s in 0..sn.n_supernodes() {
+                    let nc = e[s] - b[s];
+                    big = big.max(nc);
+                    let nr = nc + rp[s + 1] - rp[s];
+                    for c in 0..nc {
+                        let k = (nr - c) as f64;
+                        flops += k * k;
+                    }
+                }
+                eprintln!(
+                    "factor: {} supernodes, largest {big} columns, {flops:.3e} flops",
+                    sn.n_supernodes()
+                );
+            }
             eprintln!(
-                "factor: {m} unknowns, {} entries; matrix {t_matrix:.3} s, order {t_order:.3} s, \
+                "factor: {m} unknowns{}, {} entries; matrix {t_matrix:.3} s, order {t_order:.3} s, \
                  symbolic {t_symbolic:.3} s, numeric {:.3} s",
+                if reused {
+                    format!(" (kept analysis, {active} active)")
+                } else {
+                    String::new()
+                },
                 symbolic.len_val(),
                 cg::secs(t0)
             );
         }
         Ok(Factor {
-            work: vec![0.0; 2 * cells.len()],
-            cells,
-            symbolic,
+            work: vec![0.0; 2 * m],
+            analysis,
+            live,
             values,
             solve_buf,
+            reused,
         })
+    }
+
+    /// The ordering and symbolic analysis this factor was computed on.
+    pub fn analysis(&self) -> &Arc<Analysis> {
+        &self.analysis
+    }
+
+    /// Whether the factor was computed on a kept analysis ([`Factor::new_reusing`]).
+    pub fn reused(&self) -> bool {
+        self.reused
     }
 
     /// Entries of the factor.
@@ -211,27 +360,35 @@ impl Factor {
     }
 
     /// `x = A⁻¹ b` (or `x += A⁻¹ b` with `add`) on the active cells for each pair `(b, x)`
-    /// of `cols`, all columns in one pass over the factor.
+    /// of `cols`, all columns in one pass over the factor (`b` read and `x` written on the
+    /// active cells only: the other unknowns of a kept analysis are 0).
     fn solve_cells(&mut self, cols: &mut [(&[f64], &mut [f64])], add: bool) {
-        let m = self.cells.len();
+        let an = &*self.analysis;
+        let (cells, symbolic) = (&an.cells, &an.symbolic);
+        let live = |q: usize| self.live.as_ref().is_none_or(|l| l[q]);
+        let m = cells.len();
         if m == 0 {
             return;
         }
         if let (SymbolicCholeskyRaw::Supernodal(sn), 2, Some(perm)) =
-            (self.symbolic.raw(), cols.len(), self.symbolic.perm())
+            (symbolic.raw(), cols.len(), symbolic.perm())
         {
             // Both columns interleaved, in the factor's order: `w[2p + c]` is column `c` at
             // position `p`, whose cell is `cells[fwd[p]]`.
             let fwd = perm.arrays().0;
             let w = &mut self.work;
             for (p, &q) in fwd.iter().enumerate() {
-                let k = self.cells[q];
-                w[2 * p] = cols[0].0[k];
-                w[2 * p + 1] = cols[1].0[k];
+                let k = cells[q];
+                let on = live(q);
+                w[2 * p] = if on { cols[0].0[k] } else { 0.0 };
+                w[2 * p + 1] = if on { cols[1].0[k] } else { 0.0 };
             }
             supernodal_solve_pair(sn, &self.values, w);
             for (p, &q) in fwd.iter().enumerate() {
-                let k = self.cells[q];
+                if !live(q) {
+                    continue;
+                }
+                let k = cells[q];
                 if add {
                     cols[0].1[k] += w[2 * p];
                     cols[1].1[k] += w[2 * p + 1];
@@ -242,8 +399,14 @@ impl Factor {
             }
             return;
         }
-        let mut sol = Mat::<f64>::from_fn(m, cols.len(), |r, c| cols[c].0[self.cells[r]]);
-        let llt = LltRef::<'_, usize, f64>::new(&self.symbolic, &self.values);
+        let mut sol = Mat::<f64>::from_fn(m, cols.len(), |r, c| {
+            if live(r) {
+                cols[c].0[cells[r]]
+            } else {
+                0.0
+            }
+        });
+        let llt = LltRef::<'_, usize, f64>::new(symbolic, &self.values);
         llt.solve_in_place_with_conj(
             Conj::No,
             sol.as_mut(),
@@ -251,7 +414,10 @@ impl Factor {
             MemStack::new(&mut self.solve_buf),
         );
         for (c, (_, x)) in cols.iter_mut().enumerate() {
-            for (r, &k) in self.cells.iter().enumerate() {
+            for (r, &k) in cells.iter().enumerate() {
+                if !live(r) {
+                    continue;
+                }
                 if add {
                     x[k] += sol[(r, c)];
                 } else {
@@ -368,18 +534,45 @@ fn supernodal_solve_pair(sn: &SymbolicSupernodalCholesky<usize>, values: &[f64],
     }
 }
 
-/// The lower triangle (row ≥ column) of the operator on the unknowns, by columns, rows
-/// ascending: each unknown's diagonal, then its neighbours of larger index.
+/// The lower triangle (row ≥ column) of the operator on the unknowns `cells` (`index`:
+/// grid cell → unknown), by columns, rows ascending: each unknown's diagonal, then its
+/// neighbours of larger index along every grid face between two unknowns, with the face's
+/// conductance (0 on a closed face). An unknown on a cell that is not active (a kept
+/// analysis's) has diagonal 1 and no couplings (its faces are closed).
 fn lower_csc(st: &Stencil, index: &[usize], cells: &[usize]) -> (Vec<usize>, Vec<usize>, Vec<f64>) {
     let m = cells.len();
+    let (ny, nx) = (st.ny, st.nx);
     let mut col_ptr = Vec::with_capacity(m + 1);
     let mut row_idx = Vec::with_capacity(3 * m);
     let mut vals = Vec::with_capacity(3 * m);
     col_ptr.push(0);
     for (q, &k) in cells.iter().enumerate() {
+        let (i, j) = (k / nx, k % nx);
+        let base = i * nx;
+        // Every grid face of `k`: (neighbour, conductance).
+        let mut faces: [(usize, f64); 4] = [(usize::MAX, 0.0); 4];
+        let mut nf = 0;
+        let mut face = |l: usize, c: f64| {
+            faces[nf] = (l, c);
+            nf += 1;
+        };
+        if j + 1 < nx {
+            face(k + 1, st.e[k]);
+        } else if st.periodic && nx > 1 {
+            face(base, st.e[k]);
+        }
+        if let Some(wj) = st.west(j) {
+            face(base + wj, st.e[base + wj]);
+        }
+        if i + 1 < ny {
+            face(k + nx, st.s[k]);
+        }
+        if i > 0 {
+            face(k - nx, st.s[k - nx]);
+        }
         let mut below: [(usize, f64); 4] = [(usize::MAX, 0.0); 4];
         let mut nb = 0;
-        st.for_each_face(k, |l, c| {
+        for &(l, c) in &faces[..nf] {
             let t = index[l];
             if t != usize::MAX && t > q {
                 // The two faces of a 2-wide periodic row join the same pair: add them.
@@ -390,13 +583,14 @@ fn lower_csc(st: &Stencil, index: &[usize], cells: &[usize]) -> (Vec<usize>, Vec
                     nb += 1;
                 }
             }
-        });
+        }
         below[..nb].sort_unstable_by_key(|e| e.0);
         row_idx.push(q);
-        vals.push(st.d[k]);
+        vals.push(if st.active[k] { st.d[k] } else { 1.0 });
         for &(t, v) in &below[..nb] {
             row_idx.push(t);
-            vals.push(v);
+            // `-0.0 → 0.0`: a closed face stores a plain zero.
+            vals.push(v + 0.0);
         }
         col_ptr.push(row_idx.len());
     }
@@ -404,9 +598,130 @@ fn lower_csc(st: &Stencil, index: &[usize], cells: &[usize]) -> (Vec<usize>, Vec
 }
 
 /// Elimination order (new position → unknown) of the unknowns `index` (grid cell → unknown,
-/// `usize::MAX` for none) for the factor; see the module docs.
+/// `usize::MAX` for none) for the factor: the nested dissection ([`nd_order`]) on grids of at
+/// least [`ND_ALWAYS_CELLS`] cells, and of at least [`ND_FROM_CELLS`] cells when at least
+/// [`ND_OPEN_PERCENT`] % of them carry unknowns; the minimum-degree order on pieces otherwise
+/// (module docs).
 pub(super) fn ordering(st: &Stencil, index: &[usize], m: usize) -> Vec<usize> {
-    order_pieces(st, index, m, true)
+    let cells = st.ny * st.nx;
+    if cells >= ND_ALWAYS_CELLS || (cells >= ND_FROM_CELLS && 100 * m >= ND_OPEN_PERCENT * cells) {
+        nd_order(st, index, m)
+    } else {
+        order_pieces(st, index, m, true)
+    }
+}
+
+/// Grids of at least this many cells are ordered by nested dissection (512² cells: 513²
+/// and up, where it was as fast or faster on every gap measured, open or at the threshold).
+const ND_ALWAYS_CELLS: usize = 1 << 18;
+
+/// Grids of at least this many cells (256²) are ordered by nested dissection when at least
+/// [`ND_OPEN_PERCENT`] % of their cells carry unknowns.
+const ND_FROM_CELLS: usize = 1 << 16;
+
+/// See [`ND_FROM_CELLS`].
+const ND_OPEN_PERCENT: usize = 60;
+
+/// Rectangles of at most this many cells are not cut further by the nested dissection.
+const ND_LEAF: usize = 8;
+
+/// Rectangles of at least this many cells are cut by the row (column) with the fewest
+/// unknowns within [`ND_REACH`]`⁻¹` of their height (width) from the middle.
+const ND_SEARCH_CELLS: usize = 4096;
+
+/// See [`ND_SEARCH_CELLS`].
+const ND_REACH: usize = 8;
+
+/// Geometric nested dissection of the whole grid ([`nd_region`]); a wrapped grid is first
+/// opened by its last column, which comes last.
+pub(super) fn nd_order(st: &Stencil, index: &[usize], m: usize) -> Vec<usize> {
+    let mut out = Vec::with_capacity(m);
+    let (ny, nx) = (st.ny, st.nx);
+    if st.periodic && nx > 2 {
+        nd_region(st, index, (0, ny), (0, nx - 1), &mut out);
+        out.extend(
+            (0..ny)
+                .map(|i| index[i * nx + nx - 1])
+                .filter(|&q| q != usize::MAX),
+        );
+    } else {
+        nd_region(st, index, (0, ny), (0, nx), &mut out);
+    }
+    out
+}
+
+/// Nested dissection of one rectangle: cut across its longer side by a row or column near
+/// the middle ([`ND_SEARCH_CELLS`]), each side ordered the same way (in parallel when
+/// large; the order does not depend on the thread count), the cut last; a rectangle of at
+/// most [`ND_LEAF`] cells, or narrower than 3 both ways, in row-major order.
+fn nd_region(
+    st: &Stencil,
+    index: &[usize],
+    r: (usize, usize),
+    c: (usize, usize),
+    out: &mut Vec<usize>,
+) {
+    let (h, w) = (r.1 - r.0, c.1 - c.0);
+    if h == 0 || w == 0 {
+        return;
+    }
+    let nx = st.nx;
+    if h * w <= ND_LEAF || (h < 3 && w < 3) {
+        for i in r.0..r.1 {
+            out.extend(
+                (c.0..c.1)
+                    .map(|j| index[i * nx + j])
+                    .filter(|&q| q != usize::MAX),
+            );
+        }
+        return;
+    }
+    // The cut at `lo + 1 .. lo + long − 1` with the fewest unknowns within `long / ND_REACH`
+    // of the middle, the nearest to the middle on ties.
+    let best = |lo: usize, long: usize, count: &dyn Fn(usize) -> usize| -> usize {
+        let mid = lo + long / 2;
+        if h * w < ND_SEARCH_CELLS {
+            return mid;
+        }
+        let mut pick = (count(mid), 0usize, mid);
+        for d in 1..=long / ND_REACH {
+            for cand in [mid - d, mid + d] {
+                if cand > lo && cand + 1 < lo + long {
+                    pick = pick.min((count(cand), d, cand));
+                }
+            }
+        }
+        pick.2
+    };
+    let active = |i: usize, j: usize| index[i * nx + j] != usize::MAX;
+    let ((ra, ca), (rb, cb), sep): (_, _, Vec<usize>) = if h >= w {
+        let mid = best(r.0, h, &|i| (c.0..c.1).filter(|&j| active(i, j)).count());
+        (
+            ((r.0, mid), c),
+            ((mid + 1, r.1), c),
+            (c.0..c.1).map(|j| index[mid * nx + j]).collect(),
+        )
+    } else {
+        let mid = best(c.0, w, &|j| (r.0..r.1).filter(|&i| active(i, j)).count());
+        (
+            (r, (c.0, mid)),
+            (r, (mid + 1, c.1)),
+            (r.0..r.1).map(|i| index[i * nx + mid]).collect(),
+        )
+    };
+    if h * w >= 1 << 16 {
+        let (mut a, mut b) = (Vec::new(), Vec::new());
+        rayon::join(
+            || nd_region(st, index, ra, ca, &mut a),
+            || nd_region(st, index, rb, cb, &mut b),
+        );
+        out.extend(a);
+        out.extend(b);
+    } else {
+        nd_region(st, index, ra, ca, out);
+        nd_region(st, index, rb, cb, out);
+    }
+    out.extend(sep.into_iter().filter(|&q| q != usize::MAX));
 }
 
 /// [`ordering`] with blocks on the small pieces only (at most [`BLOCK_MAX_CELLS`] cells), for
@@ -449,7 +764,10 @@ fn region_order(
     let by_rows = (st.periodic && c == (0, st.nx)) || h >= w;
     let long = if by_rows { h } else { w };
     if depth == 0 || h * w < 2 * SPLIT_MIN || long < 3 {
-        amd_region(st, index, r, c, large_blocks, out);
+        let cells = h * w;
+        let blocks = cells <= BLOCK_MAX_CELLS
+            || (large_blocks && (BLOCK_FROM_CELLS..=BLOCK_UPTO_CELLS).contains(&cells));
+        amd_region(st, index, r, c, if blocks { BLOCK } else { 1 }, out);
         return;
     }
     let (mut a, mut b) = (Vec::new(), Vec::new());
@@ -505,16 +823,12 @@ fn amd_region(
     index: &[usize],
     r: (usize, usize),
     c: (usize, usize),
-    large_blocks: bool,
+    blk: usize,
     out: &mut Vec<usize>,
 ) {
     let nx = st.nx;
     let (h, w) = (r.1 - r.0, c.1 - c.0);
     let wrap = st.periodic && c == (0, nx) && nx > 2;
-    let cells = h * w;
-    let blocks = cells <= BLOCK_MAX_CELLS
-        || (large_blocks && (BLOCK_FROM_CELLS..=BLOCK_UPTO_CELLS).contains(&cells));
-    let blk = if blocks { BLOCK } else { 1 };
     let (bh, bw) = (h.div_ceil(blk), w.div_ceil(blk));
     let block_of = |i: usize, j: usize| ((i - r.0) / blk) * bw + (j - c.0) / blk;
     // Blocks holding unknowns, numbered in raster order.
@@ -633,7 +947,7 @@ mod tests {
             .collect();
         let mut f = Factor::new(&st, None).unwrap();
         assert!(matches!(
-            f.symbolic.raw(),
+            f.analysis.symbolic.raw(),
             SymbolicCholeskyRaw::Supernodal(_)
         ));
         let mut r = vec![0.0; n];
@@ -643,9 +957,9 @@ mod tests {
         };
         // faer's solve of each column on its own.
         let general = |f: &mut Factor, b: &[f64]| {
-            let m = f.cells.len();
-            let mut sol = Mat::<f64>::from_fn(m, 1, |q, _| b[f.cells[q]]);
-            let llt = LltRef::<'_, usize, f64>::new(&f.symbolic, &f.values);
+            let m = f.analysis.cells.len();
+            let mut sol = Mat::<f64>::from_fn(m, 1, |q, _| b[f.analysis.cells[q]]);
+            let llt = LltRef::<'_, usize, f64>::new(&f.analysis.symbolic, &f.values);
             llt.solve_in_place_with_conj(
                 Conj::No,
                 sol.as_mut(),
@@ -653,7 +967,7 @@ mod tests {
                 MemStack::new(&mut f.solve_buf),
             );
             let mut x = vec![0.0; n];
-            for (q, &k) in f.cells.iter().enumerate() {
+            for (q, &k) in f.analysis.cells.iter().enumerate() {
                 x[k] = sol[(q, 0)];
             }
             x

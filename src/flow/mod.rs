@@ -42,6 +42,7 @@ mod axis0;
 pub mod cg;
 pub mod direct;
 pub mod gth;
+pub mod kept;
 pub mod multigrid;
 mod paths;
 
@@ -127,6 +128,9 @@ pub struct Options<'a> {
     pub memory_limit: Option<u64>,
     /// Polled once per iteration; `true` stops with [`Error::Interrupted`].
     pub should_stop: Option<&'a (dyn Fn() -> bool + Sync)>,
+    /// An analysis kept from the previous flows of a sequence (a sweep's levels), used by
+    /// the factor when it fits and replaced when not ([`kept`]).
+    pub analysis: Option<&'a kept::KeptAnalysis>,
 }
 
 impl Default for Options<'_> {
@@ -137,6 +141,7 @@ impl Default for Options<'_> {
             max_iter: None,
             memory_limit: None,
             should_stop: None,
+            analysis: None,
         }
     }
 }

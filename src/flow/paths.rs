@@ -57,7 +57,11 @@ pub(super) fn solve_direct(
 ) -> DirectAnswer {
     let n = b_in.len();
     let (mut x, mut psi) = (vec![0.0; n], vec![0.0; n]);
+    let t0 = std::time::Instant::now();
     f.solve_pair(b_in, b_out, &mut x, &mut psi);
+    if cg::profiling() {
+        eprintln!("flow: two-column solve {:.3} s", cg::secs(t0));
+    }
     let (mut r_x, mut r_psi) = (vec![0.0; n], vec![0.0; n]);
     st.residual_compensated(&x, b_in, &mut r_x);
     st.residual_compensated(&psi, b_out, &mut r_psi);
@@ -92,7 +96,10 @@ pub(super) fn split_direct(
 ) -> DirectAnswer {
     let n = b_in.len();
     a.lo = (vec![0.0; n], vec![0.0; n]);
-    for _ in 0..DIRECT_SPLIT {
+    for step in 0..DIRECT_SPLIT {
+        if cg::profiling() {
+            eprintln!("flow: refinement step {} in two doubles", step + 1);
+        }
         let before = (a.rel_x, a.rel_psi);
         f.correct_pair(&a.r_x, &a.r_psi, &mut a.lo.0, &mut a.lo.1);
         st.residual_split(&a.x, &a.lo.0, b_in, &mut a.r_x);

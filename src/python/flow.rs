@@ -9,7 +9,64 @@ use super::pools::{check_threads, pool_for, run_solve};
 use super::{row_major, to_py};
 use crate::clusters::Flow;
 use crate::error::Error;
+use crate::flow::kept::{KeptAnalysis, DEFAULT_MIN_CELLS};
 use crate::flow::{self, Options, Problem};
+
+/// The factor's ordering and symbolic analysis kept from one flow to the next
+/// (`_core.pyi`; core: `flow::kept`).
+#[pyclass(frozen, module = "leakpath._core", name = "FlowAnalysis")]
+pub(super) struct FlowAnalysis {
+    inner: KeptAnalysis,
+}
+
+#[pymethods]
+impl FlowAnalysis {
+    #[new]
+    #[pyo3(signature = (min_cells=DEFAULT_MIN_CELLS))]
+    fn new(min_cells: usize) -> Self {
+        FlowAnalysis {
+            inner: KeptAnalysis::new(min_cells),
+        }
+    }
+
+    /// Flows that made a new analysis.
+    #[getter]
+    fn analyses(&self) -> usize {
+        self.inner.made()
+    }
+
+    /// Flows that factored on the kept analysis.
+    #[getter]
+    fn reuses(&self) -> usize {
+        self.inner.reused()
+    }
+
+    /// Unknowns of the kept analysis (0 without one).
+    #[getter]
+    fn unknowns(&self) -> usize {
+        self.inner.unknowns()
+    }
+
+    /// Entries of a factor on the kept analysis (0 without one).
+    #[getter]
+    fn entries(&self) -> usize {
+        self.inner.entries()
+    }
+
+    /// Drops the kept analysis.
+    fn clear(&self) {
+        self.inner.clear()
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "FlowAnalysis(unknowns={}, analyses={}, reuses={})",
+            self.inner.unknowns(),
+            self.inner.made(),
+            self.inner.reused()
+        )
+    }
+}
 
 /// The flow through a gap (`_core.pyi`): fields as numpy arrays, integrals as floats.
 #[pyclass(frozen, module = "leakpath._core", name = "FlowSolution")]
@@ -65,7 +122,7 @@ impl FlowSolution {
 #[pyo3(signature = (
     gap, dx, contact=None, axis=Axis(Flow::Axis0), viscosity=1.0, pressure_drop=1.0,
     periodic=false, tol=flow::DEFAULT_TOL, max_iter=None, memory_limit=None, solver="auto",
-    threads=None, labels=None
+    threads=None, labels=None, analysis=None
 ))]
 #[allow(clippy::too_many_arguments)]
 pub(super) fn solve_reynolds_flow<'py>(
@@ -83,6 +140,7 @@ pub(super) fn solve_reynolds_flow<'py>(
     solver: &str,
     threads: Option<i64>,
     labels: Option<PyRef<'py, Labelling>>,
+    analysis: Option<PyRef<'py, FlowAnalysis>>,
 ) -> PyResult<FlowSolution> {
     let axis = match axis.0 {
         Flow::Axis0 => 0,
@@ -144,6 +202,7 @@ pub(super) fn solve_reynolds_flow<'py>(
         Some(a) => Some((a.as_slice()?, labels.as_ref().map_or(0, |l| l.n_clusters()))),
         None => None,
     };
+    let kept: Option<&KeptAnalysis> = analysis.as_deref().map(|a| &a.inner);
     let start = std::time::Instant::now();
     let sol = py
         .detach(|| {
@@ -154,6 +213,7 @@ pub(super) fn solve_reynolds_flow<'py>(
                 max_iter,
                 memory_limit,
                 should_stop: Some(&stop),
+                analysis: kept,
             };
             run_solve(&pool, ny * nx, || {
                 flow::solve_labelled(&problem, &opts, lab_slice)

@@ -250,6 +250,7 @@ fn core_module(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<clusters::Labelling>()?;
     m.add_class::<clusters::Classification>()?;
     m.add_class::<flow::FlowSolution>()?;
+    m.add_class::<flow::FlowAnalysis>()?;
     m.add_function(wrap_pyfunction!(flow::solve_reynolds_flow, m)?)?;
     m.add_function(wrap_pyfunction!(solver_threads, m)?)?;
     m.add_function(wrap_pyfunction!(dense_scratch_bytes, m)?)?;
