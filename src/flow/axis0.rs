@@ -123,7 +123,16 @@ pub(super) fn solve_axis0(
         None
     } else {
         let kept = opts.analysis.filter(|k| k.applies(n));
-        match direct::Factor::new_reusing(&fine, factor_room, kept.and_then(|k| k.get()).as_ref()) {
+        let prior = kept.and_then(|k| k.get());
+        // A kept analysis carries the fill of an earlier level's larger set of unknowns: when
+        // that does not fit, this level's own (smaller) analysis may.
+        let made = match direct::Factor::new_reusing(&fine, factor_room, prior.as_ref()) {
+            Err(Error::TooLarge { .. }) if prior.is_some() => {
+                direct::Factor::new_reusing(&fine, factor_room, None)
+            }
+            made => made,
+        };
+        match made {
             Ok(f) => {
                 if let Some(k) = kept {
                     k.keep(f.analysis(), f.reused());
