@@ -299,7 +299,9 @@ impl ContactProblem {
         if !(single_precision_above >= 0.0) {
             return Err(to_py(Error::invalid(
                 "single_precision_above",
-                format!("{single_precision_above} must be a certificate level ≥ 0 (0: f64 throughout)"),
+                format!(
+                    "{single_precision_above} must be a certificate level ≥ 0 (0: f64 throughout)"
+                ),
             )));
         }
         if let Some(h) = hardness {
