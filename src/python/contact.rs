@@ -296,7 +296,7 @@ impl ContactProblem {
         single_precision_above: f64,
     ) -> PyResult<PySolution> {
         let pool = pool_for(check_threads(threads)?)?;
-        if !(single_precision_above >= 0.0) {
+        if single_precision_above.is_nan() || single_precision_above < 0.0 {
             return Err(to_py(Error::invalid(
                 "single_precision_above",
                 format!(
