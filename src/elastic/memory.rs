@@ -118,11 +118,12 @@ mod tests {
     fn memory_estimate_8193_free_fits_a_24_gib_machine() {
         // 8193² (2^13 + 1, padded FFT grid 16384²): the problem (kernel, operator, fields)
         // and the Polonsky–Keer solve each stay well below the default limit of a 24 GiB
-        // machine (80 % of what is available), 9.0 and 7.3 GiB.
+        // machine (80 % of what is available), 9.0 and 8.3 GiB (1.0 GiB of it the operator's
+        // f32 twin).
         let problem = contact_problem(8193, 8193, Boundary::Free);
         let solve = polonsky_keer(8193, 8193, Boundary::Free);
         assert!(problem < 10 << 30, "{problem}");
-        assert!(solve < 8 << 30, "{solve}");
+        assert!(solve < 9 << 30, "{solve}");
         assert!(solve > 4 * polonsky_keer(4097, 4097, Boundary::Free) - (1 << 30));
     }
 
