@@ -204,6 +204,11 @@
 //! suggests: the preconditioner products and the fused passes stay `f64`, and the products
 //! after the switch are as before. The 2049² runs shared the machine with a compile.
 //!
+//! In a sweep, whose levels start warm from the previous one, fewer iterations run above the
+//! switch: the 21-level 1025² RMD sweep (`benchmarks/sweep_scale_bench.py`) took 78.5 s CPU
+//! without the flow against 82.6 s with `f64` products (−5 %), 154.2 against 154.7 s with it
+//! (`benchmarks/results/sweep_scale.md`).
+//!
 //! Tried and not kept: the preconditioner products (inverse compliance) in `f32` during the
 //! same phase. At 1025², switch 1e-4: Δ = 0.3 h_s 54 iterations, 2.65 s CPU (2.56 s with
 //! the `f64` preconditioner); Δ = 0.6 h_s 68 iterations, 3.60 s (65 iterations, 3.61 s): no
