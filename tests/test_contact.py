@@ -394,3 +394,22 @@ def test_load_control_rescales_a_large_warm_start():
     assert np.max(np.abs(warm.pressure - cold.pressure)) <= 1e-9 * cold.pressure.max()
     with pytest.raises(InvalidArgumentError, match=r"^warm_start: .*sums to inf"):
         prob.solve(mean_pressure=0.5, warm_start=np.full(s.shape, 1e306))
+
+
+def test_single_precision_early_products_give_the_double_precision_minimiser():
+    # Oracle: the same solve in double precision throughout (single_precision_above=0).
+    s = leakpath.rmd(7, 2.2, seed=3)
+    h = np.ascontiguousarray(s.heights)
+    hs = float(h.max() - h.min())
+    prob = _core.ContactProblem(h, s.dx, 1.0, "free")
+    a = prob.solve(approach=0.3 * hs, solver="polonsky-keer", tol=1e-10)
+    b = prob.solve(
+        approach=0.3 * hs, solver="polonsky-keer", tol=1e-10, single_precision_above=0.0
+    )
+    assert a.single_products > 0 and b.single_products == 0
+    assert a.kkt <= 1e-10 and b.kkt <= 1e-10
+    np.testing.assert_array_equal(a.pressure > 0, b.pressure > 0)
+    assert abs(a.load - b.load) <= 1e-6 * b.load
+    for bad in (-1.0, float("nan")):
+        with pytest.raises(ValueError, match=r"^single_precision_above\b"):
+            prob.solve(approach=0.3 * hs, solver="polonsky-keer", single_precision_above=bad)

@@ -57,6 +57,10 @@ class ContactSolution:
         """Operator applications ``C x`` (FFT pairs of the padded grid); 0 for the exact
         solvers."""
     @property
+    def single_products(self) -> int:
+        """Of ``fft_products``, those made in single precision (Polonsky–Keer's iterations
+        while the certificate was above ``single_precision_above``)."""
+    @property
     def preconditioner_products(self) -> int:
         """Preconditioner applications (FFT pairs on the unpadded grid)."""
     @property
@@ -263,6 +267,7 @@ class ContactProblem:
         coarse_start: bool = True,
         chord_steps: bool = True,
         hardness: float | None = None,
+        single_precision_above: float = 1e-4,
     ) -> ContactSolution:
         """Solve at ``approach`` or at ``mean_pressure`` (exactly one; the exact solvers take
         the approach only). ``start``: ``"cold"`` (p = 0), ``"previous"`` (this problem's
@@ -291,6 +296,10 @@ class ContactProblem:
         ``1e-2``, prolonged bilinearly) and ``chord_steps`` (while an
         iteration truncates or adds more than 0.5 % of the contact set, the next one is a
         chord step with one FFT product of the whole change and an exact line search).
+        ``single_precision_above``: while the certificate is above this level the FFT
+        products are made in single precision (relative error ~1e-7); below it a fresh
+        double-precision product ``u = C p`` and double precision to the end, so the returned
+        fields and the certificate are double precision; ``0`` turns it off.
         ``ProblemTooLargeError`` (a ``MemoryError``) up front when the solve would need more
         than the problem's ``memory_limit``. The GIL is released; Ctrl-C raises
         ``KeyboardInterrupt`` within a fraction of a second.

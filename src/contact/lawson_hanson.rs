@@ -310,6 +310,7 @@ impl<'a> LawsonHanson<'a> {
             fft_products: 0,
             preconditioner_products: 0,
             chord_steps: 0,
+            single_products: 0,
             kkt,
             contact_points,
             plastic_points: 0,

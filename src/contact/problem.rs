@@ -9,6 +9,9 @@ use crate::grid::Boundary;
 
 /// Default KKT tolerance, relative to the height range.
 pub const DEFAULT_TOL: f64 = 1e-12;
+/// Default of [`Options::single_precision_above`]: Polonsky–Keer's FFT products are made in
+/// single precision while its certificate is above this level.
+pub const DEFAULT_SINGLE_PRECISION_ABOVE: f64 = 1e-4;
 
 /// `Solver::Auto` uses the exact block active set on grids of at most this many points and
 /// Polonsky–Keer above. Measured from p = 0 at Δ = 0.3/0.6/1.0 h_s on an idle machine
@@ -172,6 +175,11 @@ pub struct Options<'a> {
     /// [`crate::contact::capped`]). `None` or `+∞`: the elastic problem, by the
     /// Polonsky–Keer iteration unchanged. Polonsky–Keer only ([`Solver::resolve`]).
     pub hardness: Option<f64>,
+    /// Polonsky–Keer: while the certificate is above this level, the FFT products are made in
+    /// single precision ([`crate::elastic::operator32::Operator32`]); below it, a fresh
+    /// double-precision product and double precision to the end. `0` (or any level `≤ tol`):
+    /// double precision throughout. The answer is the same to the certificate.
+    pub single_precision_above: f64,
 }
 
 impl Default for Options<'_> {
@@ -185,6 +193,7 @@ impl Default for Options<'_> {
             coarse_start: true,
             chord_steps: true,
             hardness: None,
+            single_precision_above: DEFAULT_SINGLE_PRECISION_ABOVE,
         }
     }
 }
@@ -225,6 +234,9 @@ pub struct Solution {
     /// large set changes, convergence checks) and one for the influence table when no kernel
     /// table was at hand; 0 for the exact solvers.
     pub fft_products: usize,
+    /// Of `fft_products`, those made in single precision (Polonsky–Keer's early iterations,
+    /// [`Options::single_precision_above`]).
+    pub single_products: usize,
     /// Preconditioner applications (FFT pairs on the unpadded `ny × nx` grid), one per
     /// preconditioned iteration; 0 for the exact solvers.
     pub preconditioner_products: usize,

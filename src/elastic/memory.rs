@@ -28,7 +28,7 @@ pub fn operator(ny: usize, nx: usize, boundary: Boundary) -> u64 {
 
 /// Peak bytes of a Polonsky–Keer solve ([`crate::contact::polonsky_keer::solve`]) on an `ny × nx` grid: the larger of building the operator (free:
 /// kernel table, padded kernel and its half spectrum) and iterating (kernel spectrum, the
-/// operator's half-spectrum buffer, six `N`-vectors `p, u, g, t, r` and the influence table
+/// operator's half-spectrum buffer and their `f32` twins, six `N`-vectors `p, u, g, t, r` and the influence table
 /// of the sparse corrections), plus one copy of the heights (the bindings copy non-contiguous
 /// input) and a margin for the coarse-to-fine start.
 pub fn polonsky_keer(ny: usize, nx: usize, boundary: Boundary) -> u64 {
@@ -58,8 +58,11 @@ pub fn polonsky_keer(ny: usize, nx: usize, boundary: Boundary) -> u64 {
         .saturating_mul(8)
         .saturating_add((ny as u64).saturating_mul(qxh).saturating_mul(16))
         .saturating_add(n.saturating_mul(8));
+    // The operator's f32 twin of the early iterations: half the bytes of spectrum and apply.
+    let single = spec.saturating_add(apply) / 2;
     let iterate = spec
         .saturating_add(apply)
+        .saturating_add(single)
         .saturating_add(n.saturating_mul(6 * 8))
         .saturating_add(pre);
     // The coarse-start pressure becomes the iterate `p`. The coarse levels run on a quarter of
@@ -115,11 +118,12 @@ mod tests {
     fn memory_estimate_8193_free_fits_a_24_gib_machine() {
         // 8193² (2^13 + 1, padded FFT grid 16384²): the problem (kernel, operator, fields)
         // and the Polonsky–Keer solve each stay well below the default limit of a 24 GiB
-        // machine (80 % of what is available), 9.0 and 7.3 GiB.
+        // machine (80 % of what is available), 9.0 and 8.3 GiB (1.0 GiB of it the operator's
+        // f32 twin).
         let problem = contact_problem(8193, 8193, Boundary::Free);
         let solve = polonsky_keer(8193, 8193, Boundary::Free);
         assert!(problem < 10 << 30, "{problem}");
-        assert!(solve < 8 << 30, "{solve}");
+        assert!(solve < 9 << 30, "{solve}");
         assert!(solve > 4 * polonsky_keer(4097, 4097, Boundary::Free) - (1 << 30));
     }
 

@@ -15,7 +15,7 @@
 //! stored and the padded rows are never touched. Every stage runs on rayon; each output value
 //! is computed by the same sequence of operations whatever the thread count.
 
-use std::sync::{Arc, Mutex};
+use std::sync::{Arc, Mutex, OnceLock};
 
 use rayon::prelude::*;
 use realfft::{ComplexToReal, RealFftPlanner, RealToComplex};
@@ -24,6 +24,7 @@ use rustfft::{Fft, FftPlanner};
 
 use crate::alloc;
 use crate::elastic::kernel::Kernel;
+use crate::elastic::operator32::Operator32;
 use crate::error::Result;
 use crate::grid::{padded, smooth_size, Boundary};
 
@@ -49,6 +50,8 @@ pub struct Operator {
     col_inv: Arc<dyn Fft<f64>>,
     /// Scratch half spectrum of one apply (`ny × pxh`), kept between calls.
     half: Mutex<Vec<Complex64>>,
+    /// The single-precision twin, built on first use ([`Operator::single`]).
+    single: OnceLock<Operator32>,
 }
 
 impl Operator {
@@ -176,6 +179,7 @@ impl Operator {
             col_fwd: cp.plan_fft_forward(py),
             col_inv: cp.plan_fft_inverse(py),
             half: Mutex::new(half),
+            single: OnceLock::new(),
         })
     }
 
@@ -216,6 +220,22 @@ impl Operator {
             },
         );
         Ok(spec)
+    }
+
+    /// The real kernel spectrum, column-major over the half spectrum (`Py·(Px/2+1)` values),
+    /// divided by `Py·Px`.
+    pub fn spectrum(&self) -> &[f64] {
+        &self.spec
+    }
+
+    /// The same product with `f32` FFTs ([`Operator32`]), built on first use and kept;
+    /// `Error::TooLarge` when its buffers cannot be allocated.
+    pub fn single(&self) -> Result<&Operator32> {
+        if let Some(s) = self.single.get() {
+            return Ok(s);
+        }
+        let built = Operator32::try_new(self)?;
+        Ok(self.single.get_or_init(|| built))
     }
 
     /// `u = C p` for row-major `ny × nx` fields.

@@ -74,6 +74,8 @@ pub(super) struct PySolution {
     #[pyo3(get)]
     fft_products: usize,
     #[pyo3(get)]
+    single_products: usize,
+    #[pyo3(get)]
     preconditioner_products: usize,
     #[pyo3(get)]
     chord_steps: usize,
@@ -104,6 +106,7 @@ impl PySolution {
             approach: s.approach,
             iterations: s.iterations,
             fft_products: s.fft_products,
+            single_products: s.single_products,
             preconditioner_products: s.preconditioner_products,
             chord_steps: s.chord_steps,
             kkt: s.kkt,
@@ -263,12 +266,15 @@ impl ContactProblem {
     /// "polonsky-keer", "active-set", "lawson-hanson"). `start`: "cold" (p = 0), "previous"
     /// (this problem's last solve), "pressure" with `initial_pressure` or "set" with
     /// `contact_set` (flat indices). `precondition`, `coarse_start`, `chord_steps` tune
-    /// Polonsky–Keer (see `contact::Options`); the answer is the same minimiser. `hardness`:
+    /// Polonsky–Keer (see `contact::Options`), as does `single_precision_above` (the
+    /// certificate above which its FFT products are made in f32; 0: f64 throughout); the
+    /// answer is the same minimiser. `hardness`:
     /// cap the pressure at `p ≤ H` (`contact::capped`; `None` or `inf`: elastic).
     #[pyo3(signature = (
         approach=None, mean_pressure=None, solver="auto", start="cold",
         initial_pressure=None, contact_set=None, tol=1e-12, max_iter=None, threads=None,
-        precondition=true, coarse_start=true, chord_steps=true, hardness=None
+        precondition=true, coarse_start=true, chord_steps=true, hardness=None,
+        single_precision_above=crate::contact::problem::DEFAULT_SINGLE_PRECISION_ABOVE
     ))]
     #[allow(clippy::too_many_arguments)]
     fn solve(
@@ -287,8 +293,17 @@ impl ContactProblem {
         coarse_start: bool,
         chord_steps: bool,
         hardness: Option<f64>,
+        single_precision_above: f64,
     ) -> PyResult<PySolution> {
         let pool = pool_for(check_threads(threads)?)?;
+        if single_precision_above.is_nan() || single_precision_above < 0.0 {
+            return Err(to_py(Error::invalid(
+                "single_precision_above",
+                format!(
+                    "{single_precision_above} must be a certificate level ≥ 0 (0: f64 throughout)"
+                ),
+            )));
+        }
         if let Some(h) = hardness {
             crate::contact::polonsky_keer::check_hardness(h).map_err(to_py)?;
         }
@@ -381,6 +396,7 @@ impl ContactProblem {
                 coarse_start,
                 chord_steps,
                 hardness,
+                single_precision_above,
                 ..Options::default()
             };
             let result = run_solve(&pool, n, || work.solve(control, solver, start, &opts));

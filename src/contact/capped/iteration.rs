@@ -470,6 +470,7 @@ fn run_steps(
         fft_products: applies,
         preconditioner_products: pre_applies,
         chord_steps: 0,
+        single_products: 0,
         kkt: state.certificate() / sc,
         contact_points: state.n_c,
         plastic_points: state.n_pl,

@@ -480,6 +480,7 @@ fn full_plastic(
         fft_products: 1,
         preconditioner_products: 0,
         chord_steps: 0,
+        single_products: 0,
         kkt: red.certificate() / scale,
         contact_points: n,
         plastic_points: n,

@@ -147,6 +147,7 @@ pub fn start(
         coarse_start: true,
         chord_steps: opts.chord_steps,
         hardness: opts.hardness,
+        single_precision_above: opts.single_precision_above,
     };
     // Only the coarse pressure is used: no confirming product at the end of a coarse level.
     let sol = solve_coarse(&coarse, coarse_control, &copts, levels - 1)?;

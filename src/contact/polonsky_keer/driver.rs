@@ -121,8 +121,18 @@ pub(super) fn run(
     let n_chunks = n.div_ceil(CHUNK);
     let sparse_max = sparse_limit(op.boundary);
     let u_in_r = matches!(mode, Mode::Displacement(_));
+    // Products in f32 while the certificate is above the switch level (not worth it when the
+    // tolerance is already above it: the confirming f64 product would be an extra one).
+    let switch = opts.single_precision_above;
+    let single = if switch > opts.tol && switch.is_finite() {
+        Some(op.single()?)
+    } else {
+        None
+    };
     let mut w = Work {
         op,
+        single,
+        single_applies: 0,
         h,
         hmax,
         p: match start {
@@ -206,10 +216,20 @@ pub(super) fn run(
         }
         best_cert = best_cert.min(cert);
         if cert <= opts.tol {
-            if fresh || finish == Finish::Incremental {
+            if (fresh && w.single.is_none()) || finish == Finish::Incremental {
                 break;
             }
-            // Converged on the incrementally updated u: confirm on a fresh product.
+            // Converged on the incrementally updated u (or on f32 products): confirm on a
+            // fresh f64 product.
+            w.single = None;
+            w.refresh_u();
+            (state, delta) = w.evaluate(mode);
+            fresh = true;
+            continue;
+        }
+        if w.single.is_some() && cert <= switch {
+            // Below the switch level: a fresh f64 product, and f64 from here on.
+            w.single = None;
             w.refresh_u();
             (state, delta) = w.evaluate(mode);
             fresh = true;
@@ -293,8 +313,7 @@ pub(super) fn run(
                     Mode::Load(target) => w.chord_load(tau0, tau_ol0, target),
                 };
                 if trial.gt < 0.0 {
-                    w.op.apply(&w.t, &mut w.r);
-                    w.applies += 1;
+                    w.product_t();
                     let drd = w.curvature(false, false).rt;
                     let s = if positive(drd) {
                         (-trial.gt / drd).min(1.0)
@@ -340,8 +359,7 @@ pub(super) fn run(
         }
 
         // Steps 3–4.
-        w.op.apply(&w.t, &mut w.r);
-        w.applies += 1;
+        w.product_t();
         let curv = w.curvature(steepest, matches!(mode, Mode::Load(_)));
         let denom = match mode {
             Mode::Displacement(_) => curv.rt,
@@ -433,6 +451,7 @@ pub(super) fn run(
     let kkt = state.certificate() / scale_at(delta);
     let sum_p = state.sum_p;
     let applies = w.applies;
+    let single_applies = w.single_applies;
     let pre_applies = w.pre_applies;
     let pressure = std::mem::take(&mut w.p);
     let gap = std::mem::take(&mut w.g);
@@ -451,6 +470,7 @@ pub(super) fn run(
         approach: delta,
         iterations: it,
         fft_products: applies,
+        single_products: single_applies,
         preconditioner_products: pre_applies,
         chord_steps,
         kkt,

@@ -166,6 +166,54 @@
 //! 20 products of the 4096² padded grid by transform size, next to 92.9 products
 //! (`benchmarks/results/contact_scale.md`).
 //!
+//! # Single-precision products in the early iterations
+//!
+//! While the certificate is above [`Options::single_precision_above`] (default
+//! [`crate::contact::problem::DEFAULT_SINGLE_PRECISION_ABOVE`] `= 1e-4`), the products `C t`,
+//! `C d` and `C p` of the iteration are made by the operator's `f32` twin
+//! ([`crate::elastic::operator32::Operator32`]: the same transform with the kernel spectrum,
+//! the half spectrum and the FFTs in `f32`, relative error below `1e-6` of `max |u|`). Linear
+//! convergence takes 20–30 iterations from a warm start to a certificate of `1e-3`, and a
+//! product error of `~1e-6` is harmless while the certificate is far above it. When the
+//! certificate falls to the switch level (or to `tol`, if that is higher), `u = C p` is
+//! recomputed in `f64` and the iteration continues in `f64` to the end, so the convergence
+//! test on a fresh product, the returned fields and the certificate are double precision as
+//! without the switch (the tests find identical contact sets). The sparse corrections use the
+//! `f64` influence table throughout. [`Solution::single_products`] counts the `f32` products
+//! (included in `fft_products`). A switch level `≤ tol` (e.g. `0`) turns it off; so does a
+//! finishing tolerance above the level.
+//!
+//! What it bought, cold free solves of RMD D = 2.2 seed 0 (`h_s` = range, tol 1e-8, coarse
+//! start; CPU seconds by `time.process_time`, machine shared, load average 5.7–6.1, one run
+//! each; iterations / products (of which f32) / CPU s):
+//!
+//! | size | Δ/h_s | f64 throughout | switch 1e-4 | switch 1e-5 |
+//! |---|---|---|---|---|
+//! | 1025² | 0.1 | 28 / 33 / 1.70 | 28 / 34 (19) / 1.65 | 28 / 34 (22) / 1.41 |
+//! | 1025² | 0.3 | 54 / 65 / 3.68 | 54 / 66 (34) / 2.66 | 54 / 66 (45) / 2.43 |
+//! | 1025² | 0.6 | 67 / 86 / 4.02 | 65 / 84 (44) / 3.46 | 65 / 84 (58) / 3.43 |
+//! | 2049² | 0.1 | 35 / 43 / 7.78 | 35 / 44 (23) / 7.55 | 35 / 44 (29) / 7.59 |
+//! | 2049² | 0.3 | 71 / 90 / 17.27 | 81 / 104 (54) / 16.51 | 81 / 104 (70) / 16.10 |
+//! | 2049² | 0.6 | 108 / 146 / 29.11 | 94 / 131 (68) / 23.91 | 95 / 131 (90) / 22.39 |
+//!
+//! (switch 1e-3 at 1025²: 28/34 (12)/1.69, 54/66 (23)/2.63, 64/83 (31)/3.69.) Contact sets
+//! identical to the f64 solve in every case but one point at 1025², Δ = 0.6 h_s, switch 1e-5;
+//! loads within 2·10⁻⁸ relative, gaps within 1.2·10⁻⁸ h_s. The `f32` iterates take a
+//! slightly different path, so the iteration count moves either way (2049², 0.3 h_s: +10;
+//! 0.6 h_s: −14). The CPU saving is 3–28 %, smaller at 2049² than the FFT speed ratio
+//! suggests: the preconditioner products and the fused passes stay `f64`, and the products
+//! after the switch are as before. The 2049² runs shared the machine with a compile.
+//!
+//! In a sweep, whose levels start warm from the previous one, fewer iterations run above the
+//! switch: the 21-level 1025² RMD sweep (`benchmarks/sweep_scale_bench.py`) took 78.5 s CPU
+//! without the flow against 82.6 s with `f64` products (−5 %), 154.2 against 154.7 s with it
+//! (`benchmarks/results/sweep_scale.md`).
+//!
+//! Tried and not kept: the preconditioner products (inverse compliance) in `f32` during the
+//! same phase. At 1025², switch 1e-4: Δ = 0.3 h_s 54 iterations, 2.65 s CPU (2.56 s with
+//! the `f64` preconditioner); Δ = 0.6 h_s 68 iterations, 3.60 s (65 iterations, 3.61 s): no
+//! saving and more iterations, so the preconditioner stays `f64`.
+//!
 //! # Convergence
 //!
 //! The KKT certificate, relative to the height range `h_s = max h − min h`:

@@ -8,6 +8,7 @@ use rayon::prelude::*;
 
 use super::{CHUNK, SPARSE_MAX};
 use crate::elastic::operator::Operator;
+use crate::elastic::operator32::Operator32;
 
 /// `x > 0` and not NaN.
 #[inline]
@@ -146,6 +147,11 @@ impl Acc {
 /// scales it with `p`.
 pub(super) struct Work<'a> {
     pub(super) op: &'a Operator,
+    /// While set, the products `C t` and `C p` of the iteration use this `f32` twin of `op`
+    /// (the early iterations, see the module documentation).
+    pub(super) single: Option<&'a Operator32>,
+    /// Products made by `single` (included in `applies`).
+    pub(super) single_applies: usize,
     pub(super) h: &'a [f64],
     pub(super) hmax: f64,
     pub(super) p: Vec<f64>,
@@ -205,14 +211,32 @@ pub(super) fn rewrite_t(
 }
 
 impl Work<'_> {
-    /// `u = C p`.
+    /// `u = C p` (in `f32` while [`Work::single`] is set).
     pub(super) fn refresh_u(&mut self) {
         let u = if self.u_in_r {
             &mut self.r
         } else {
             &mut self.u
         };
-        self.op.apply(&self.p, u);
+        match self.single {
+            Some(s) => {
+                s.apply(&self.p, u);
+                self.single_applies += 1;
+            }
+            None => self.op.apply(&self.p, u),
+        }
+        self.applies += 1;
+    }
+
+    /// `r = C t` (in `f32` while [`Work::single`] is set).
+    pub(super) fn product_t(&mut self) {
+        match self.single {
+            Some(s) => {
+                s.apply(&self.t, &mut self.r);
+                self.single_applies += 1;
+            }
+            None => self.op.apply(&self.t, &mut self.r),
+        }
         self.applies += 1;
     }
 
@@ -329,6 +353,8 @@ impl Work<'_> {
         // z is only needed on I_c: rows without a contact point skip their inverse row FFT.
         let nx = self.nx;
         let in_contact = |i: usize| p[i * nx..(i + 1) * nx].iter().any(|&v| v > 0.0);
+        // Always in f64: its products on the unpadded grid cost a quarter of a product of
+        // C, and in f32 they did not pay (see the module documentation).
         self.pre
             .as_ref()
             .expect("precondition() needs a preconditioner")

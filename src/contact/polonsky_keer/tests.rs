@@ -826,3 +826,98 @@ fn caller_kernel_table_and_incremental_finish() {
         .is_err());
     }
 }
+
+#[test]
+fn single_precision_early_products_reach_the_same_minimiser() {
+    // f32 products while the certificate is above the switch level, then f64: the same
+    // contact set as a solve in f64 throughout, certificates below tol, loads and gaps within
+    // the certificates' bound; the returned gap is the f64 gap of the returned pressure
+    // (recomputed here with the f64 operator).
+    let tol = 1e-10;
+    for (ny, nx, boundary) in [
+        (129usize, 129usize, Boundary::Free),
+        (144, 160, Boundary::Periodic),
+    ] {
+        let h = rough(ny, nx, 31);
+        let (hmax, hmin, _) = height_stats(&h);
+        let hs = hmax - hmin;
+        let pr = problem(&h, ny, nx, boundary);
+        let op = match boundary {
+            Boundary::Free => Operator::free(&crate::elastic::kernel::Kernel::new(
+                ny, nx, pr.dx, pr.e_star,
+            )),
+            Boundary::Periodic => Operator::periodic(ny, nx, pr.dx, pr.e_star),
+        };
+        let double = Options {
+            single_precision_above: 0.0,
+            ..opts(tol)
+        };
+        let mut single_used = 0;
+        for control in [
+            Control::Approach(0.2 * hs),
+            Control::Approach(0.5 * hs),
+            Control::MeanPressure(0.02),
+        ] {
+            let a = solve(&pr, control, &opts(tol), None).unwrap();
+            let b = solve(&pr, control, &double, None).unwrap();
+            assert_eq!(b.single_products, 0);
+            single_used += a.single_products;
+            assert!(a.single_products < a.fft_products);
+            assert!(a.kkt <= tol && b.kkt <= tol, "{boundary:?} {control:?}");
+            let ca: Vec<bool> = a.pressure.iter().map(|&p| p > 0.0).collect();
+            let cb: Vec<bool> = b.pressure.iter().map(|&p| p > 0.0).collect();
+            assert_eq!(ca, cb, "{boundary:?} {control:?}");
+            // The gap of the returned pressure, in f64.
+            let mut u = vec![0.0; ny * nx];
+            op.apply(&a.pressure, &mut u);
+            let g: Vec<f64> = (0..ny * nx)
+                .map(|i| hmax - a.approach - h[i] + u[i])
+                .collect();
+            let scale = hs.max(a.approach);
+            for (x, y) in g.iter().zip(&a.gap) {
+                assert!((x - y).abs() <= 1e-12 * scale, "{boundary:?} {control:?}");
+            }
+            assert!(kkt_certificate(&a.pressure, &g, scale) <= 2.0 * tol);
+            let bound = (a.kkt + b.kkt) * scale;
+            let dg = a
+                .gap
+                .iter()
+                .zip(&b.gap)
+                .zip(&a.pressure)
+                .filter(|&(_, &p)| p > 0.0)
+                .fold(0.0f64, |m, ((x, y), _)| m.max((x - y).abs()));
+            assert!(dg <= bound, "{boundary:?} {control:?}: {dg} vs {bound}");
+            let dl = (a.load - b.load).abs() / b.load;
+            assert!(dl <= 1e-6, "{boundary:?} {control:?}: load rel diff {dl}");
+            assert!((a.approach - b.approach).abs() <= 1e3 * bound);
+        }
+        assert!(single_used > 0, "{boundary:?}: no f32 product was made");
+    }
+}
+
+#[test]
+fn single_precision_products_are_the_same_for_one_and_two_threads() {
+    let (ny, nx) = (129usize, 120usize);
+    let h = rough(ny, nx, 5);
+    let pr = problem(&h, ny, nx, Boundary::Free);
+    let run = |threads: usize, control: Control| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap()
+            .install(|| solve(&pr, control, &opts(1e-10), None).unwrap())
+    };
+    for control in [Control::Approach(0.15), Control::MeanPressure(0.01)] {
+        let a = run(1, control);
+        let b = run(2, control);
+        assert!(a.single_products > 0);
+        assert_eq!(
+            (a.iterations, a.fft_products, a.single_products),
+            (b.iterations, b.fft_products, b.single_products)
+        );
+        let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&a.pressure), bits(&b.pressure));
+        assert_eq!(bits(&a.gap), bits(&b.gap));
+        assert_eq!(a.approach.to_bits(), b.approach.to_bits());
+    }
+}
