@@ -176,7 +176,7 @@ pub struct Options<'a> {
     /// Polonsky–Keer iteration unchanged. Polonsky–Keer only ([`Solver::resolve`]).
     pub hardness: Option<f64>,
     /// Polonsky–Keer: while the certificate is above this level, the FFT products are made in
-    /// single precision ([`crate::elastic::operator32::Operator32`]); below it, a fresh
+    /// single precision ([`crate::elastic::transform::Operator32`]); below it, a fresh
     /// double-precision product and double precision to the end. `0` (or any level `≤ tol`):
     /// double precision throughout. The answer is the same to the certificate.
     pub single_precision_above: f64,

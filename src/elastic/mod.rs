@@ -4,4 +4,4 @@
 pub mod kernel;
 pub mod memory;
 pub mod operator;
-pub mod operator32;
+pub mod transform;

@@ -9,27 +9,20 @@
 //!   `q ≠ 0`, `û_0 = 0` (u has zero mean), `q = 2π·(k/L)` rad/length — the convention of Tamaas
 //!   and of ContactMechanics' `PeriodicFFTElasticHalfSpace` with zero q = 0 stiffness.
 //!
-//! The 2-D real transform is done as real-to-complex FFTs along rows, then complex FFTs along
-//! columns. The column pass is fused — gather a block of columns, forward FFT, multiply by the
-//! kernel spectrum, inverse FFT, scatter — so only `ny` rows of the half spectrum are ever
-//! stored and the padded rows are never touched. Every stage runs on rayon; each output value
-//! is computed by the same sequence of operations whatever the thread count.
+//! The product itself (row FFTs, a fused column pass, zero rows skipped) is
+//! [`crate::elastic::transform::Transform`], in `f64` here and in `f32` for the
+//! single-precision twin ([`Operator::single`]).
 
-use std::sync::{Arc, Mutex, OnceLock};
+use std::sync::OnceLock;
 
 use rayon::prelude::*;
-use realfft::{ComplexToReal, RealFftPlanner, RealToComplex};
 use rustfft::num_complex::Complex64;
-use rustfft::{Fft, FftPlanner};
 
 use crate::alloc;
 use crate::elastic::kernel::Kernel;
-use crate::elastic::operator32::Operator32;
+use crate::elastic::transform::{Operator32, Transform};
 use crate::error::Result;
 use crate::grid::{padded, smooth_size, Boundary};
-
-/// Columns handled per rayon task in the fused column pass.
-const COLUMN_BLOCK: usize = 8;
 
 /// `u = C p` by FFT for an `ny × nx` grid.
 pub struct Operator {
@@ -39,17 +32,8 @@ pub struct Operator {
     /// Transform sizes (`py = ny`, `px = nx` when periodic).
     pub py: usize,
     pub px: usize,
-    /// Half-spectrum width `px/2 + 1`.
-    pxh: usize,
-    /// Real kernel spectrum, column-major over the half spectrum: `spec[c * py + r]`, already
-    /// divided by `py·px` (the inverse transforms are unnormalised).
-    spec: Vec<f64>,
-    r2c: Arc<dyn RealToComplex<f64>>,
-    c2r: Arc<dyn ComplexToReal<f64>>,
-    col_fwd: Arc<dyn Fft<f64>>,
-    col_inv: Arc<dyn Fft<f64>>,
-    /// Scratch half spectrum of one apply (`ny × pxh`), kept between calls.
-    half: Mutex<Vec<Complex64>>,
+    /// Plans, kernel spectrum and apply buffer of the product.
+    fft: Transform<f64>,
     /// The single-precision twin, built on first use ([`Operator::single`]).
     single: OnceLock<Operator32>,
 }
@@ -84,7 +68,7 @@ impl Operator {
                     }
                 }
             });
-        op.spec = op.full_spectrum(padded_kernel)?;
+        op.fft.spec = op.full_spectrum(padded_kernel)?;
         Ok(op)
     }
 
@@ -104,7 +88,7 @@ impl Operator {
     /// its buffers cannot be allocated.
     pub fn try_periodic(ny: usize, nx: usize, dx: f64, e_star: f64) -> Result<Self> {
         let mut op = Self::plan(ny, nx, ny, nx, Boundary::Periodic)?;
-        op.spec = op.radial_spectrum(dx, "the stiffness spectrum", |q| {
+        op.fft.spec = op.radial_spectrum(dx, "the stiffness spectrum", |q| {
             if q > 0.0 {
                 2.0 / (e_star * q)
             } else {
@@ -125,7 +109,7 @@ impl Operator {
         let (py, px) = (smooth_size(ny), smooth_size(nx));
         let mut op = Self::plan(ny, nx, py, px, Boundary::Periodic)?;
         let q_min = 2.0 * std::f64::consts::PI / (py.max(px) as f64 * dx);
-        op.spec = op.radial_spectrum(dx, "the preconditioner spectrum", |q| {
+        op.fft.spec = op.radial_spectrum(dx, "the preconditioner spectrum", |q| {
             0.5 * e_star * q.max(q_min)
         })?;
         Ok(op)
@@ -139,7 +123,7 @@ impl Operator {
         what: &str,
         f: impl Fn(f64) -> f64 + Sync,
     ) -> Result<Vec<f64>> {
-        let (py, px, pxh) = (self.py, self.px, self.pxh);
+        let (py, px, pxh) = (self.py, self.px, self.px / 2 + 1);
         let norm = 1.0 / (py * px) as f64;
         let two_pi = 2.0 * std::f64::consts::PI;
         let (ly, lx) = (py as f64 * dx, px as f64 * dx);
@@ -161,24 +145,13 @@ impl Operator {
 
     /// FFT plans and the apply buffer (allocated here, so that `apply` never has to).
     fn plan(ny: usize, nx: usize, py: usize, px: usize, boundary: Boundary) -> Result<Self> {
-        let pxh = px / 2 + 1;
-        let cells = alloc::checked_cells(ny, pxh, "the half spectrum")?;
-        let half = alloc::try_zeroed(cells, &format!("the {ny} × {pxh} half spectrum"))?;
-        let mut rp = RealFftPlanner::<f64>::new();
-        let mut cp = FftPlanner::<f64>::new();
         Ok(Operator {
             ny,
             nx,
             boundary,
             py,
             px,
-            pxh: px / 2 + 1,
-            spec: Vec::new(),
-            r2c: rp.plan_fft_forward(px),
-            c2r: rp.plan_fft_inverse(px),
-            col_fwd: cp.plan_fft_forward(py),
-            col_inv: cp.plan_fft_inverse(py),
-            half: Mutex::new(half),
+            fft: Transform::plan(ny, nx, py, px, Vec::new())?,
             single: OnceLock::new(),
         })
     }
@@ -186,15 +159,16 @@ impl Operator {
     /// Real part of the 2-D FFT of a real even `py × px` field, column-major over the half
     /// spectrum and divided by `py·px`.
     fn full_spectrum(&self, mut field: Vec<f64>) -> Result<Vec<f64>> {
-        let (py, px, pxh) = (self.py, self.px, self.pxh);
+        let (py, px, pxh) = (self.py, self.px, self.px / 2 + 1);
         let mut half: Vec<Complex64> =
             alloc::try_zeroed(py * pxh, &format!("the {py} × {pxh} kernel half spectrum"))?;
         half.par_chunks_mut(pxh)
             .zip(field.par_chunks_mut(px))
             .for_each_init(
-                || self.r2c.make_scratch_vec(),
+                || self.fft.r2c.make_scratch_vec(),
                 |scratch, (out, inp)| {
-                    self.r2c
+                    self.fft
+                        .r2c
                         .process_with_scratch(inp, out, scratch)
                         .expect("row FFT lengths are fixed by the plan");
                 },
@@ -206,14 +180,14 @@ impl Operator {
             || {
                 (
                     vec![Complex64::new(0.0, 0.0); py],
-                    vec![Complex64::new(0.0, 0.0); self.col_fwd.get_inplace_scratch_len()],
+                    vec![Complex64::new(0.0, 0.0); self.fft.col_fwd.get_inplace_scratch_len()],
                 )
             },
             |(buf, scratch), (c, col)| {
                 for r in 0..py {
                     buf[r] = half[r * pxh + c];
                 }
-                self.col_fwd.process_with_scratch(buf, scratch);
+                self.fft.col_fwd.process_with_scratch(buf, scratch);
                 for r in 0..py {
                     col[r] = buf[r].re * norm;
                 }
@@ -225,7 +199,7 @@ impl Operator {
     /// The real kernel spectrum, column-major over the half spectrum (`Py·(Px/2+1)` values),
     /// divided by `Py·Px`.
     pub fn spectrum(&self) -> &[f64] {
-        &self.spec
+        &self.fft.spec
     }
 
     /// The same product with `f32` FFTs ([`Operator32`]), built on first use and kept;
@@ -234,126 +208,25 @@ impl Operator {
         if let Some(s) = self.single.get() {
             return Ok(s);
         }
-        let built = Operator32::try_new(self)?;
+        let (ny, nx, py, px) = (self.ny, self.nx, self.py, self.px);
+        let src = self.spectrum();
+        let mut spec: Vec<f32> = alloc::try_with_capacity(src.len(), "the f32 kernel spectrum")?;
+        spec.extend(src.iter().map(|&v| v as f32));
+        let built = Transform::plan(ny, nx, py, px, spec)?;
         Ok(self.single.get_or_init(|| built))
     }
 
     /// `u = C p` for row-major `ny × nx` fields.
     pub fn apply(&self, p: &[f64], u: &mut [f64]) {
-        self.apply_rows(p, u, None);
+        self.fft.apply(p, u);
     }
 
     /// `u = C p` on the rows `i` with `keep(i)`; `u = 0` on the other rows, whose inverse row
     /// FFTs are skipped (the preconditioner, whose result is only used on the contact set).
     pub fn apply_on_rows(&self, p: &[f64], u: &mut [f64], keep: &(dyn Fn(usize) -> bool + Sync)) {
-        self.apply_rows(p, u, Some(keep));
-    }
-
-    /// `u = C p`, on every row or only on the rows `keep` selects. A row of `p` that is zero
-    /// has a zero row transform, so its forward row FFT is skipped (the iterates of a contact
-    /// solve vanish outside the contact set, often on whole rows).
-    fn apply_rows(&self, p: &[f64], u: &mut [f64], keep: Option<&(dyn Fn(usize) -> bool + Sync)>) {
-        let (ny, nx, py, px, pxh) = (self.ny, self.nx, self.py, self.px, self.pxh);
-        assert_eq!(p.len(), ny * nx);
-        assert_eq!(u.len(), ny * nx);
-        let zero = Complex64::new(0.0, 0.0);
-        // Rows: real-to-complex on the zero-padded row.
-        // The half spectrum is reused across calls: at 4097² a fresh 280 MB buffer per apply
-        // costs more in page faults than the FFTs. Every entry is overwritten below.
-        let mut guard = self.half.lock().unwrap_or_else(|e| e.into_inner());
-        if guard.len() != ny * pxh {
-            *guard = vec![zero; ny * pxh];
-        }
-        let half: &mut [Complex64] = &mut guard;
-        half.par_chunks_mut(pxh).enumerate().for_each_init(
-            || (vec![0.0; px], self.r2c.make_scratch_vec()),
-            |(row, scratch), (i, out)| {
-                let src = &p[i * nx..(i + 1) * nx];
-                if src.iter().all(|&v| v == 0.0) {
-                    out.fill(zero);
-                    return;
-                }
-                row[..nx].copy_from_slice(src);
-                row[nx..].fill(0.0);
-                self.r2c
-                    .process_with_scratch(row, out, scratch)
-                    .expect("row FFT lengths are fixed by the plan");
-            },
-        );
-        // Columns: fused forward FFT, multiply, inverse FFT, on blocks of columns. Each task
-        // owns a disjoint set of columns of `half`; the raw pointer hands that out without a
-        // transpose.
-        let n_blocks = pxh.div_ceil(COLUMN_BLOCK);
-        let half_ptr = SyncPtr(half.as_mut_ptr());
-        (0..n_blocks).into_par_iter().for_each_init(
-            || {
-                let s = self
-                    .col_fwd
-                    .get_inplace_scratch_len()
-                    .max(self.col_inv.get_inplace_scratch_len());
-                (vec![zero; py * COLUMN_BLOCK], vec![zero; s])
-            },
-            |(buf, scratch), b| {
-                let c0 = b * COLUMN_BLOCK;
-                let c1 = (c0 + COLUMN_BLOCK).min(pxh);
-                let w = c1 - c0;
-                let hp = half_ptr;
-                for (t, c) in (c0..c1).enumerate() {
-                    let col = &mut buf[t * py..(t + 1) * py];
-                    for (r, v) in col[..ny].iter_mut().enumerate() {
-                        // SAFETY: column c belongs to this task only; r < ny rows exist.
-                        *v = unsafe { *hp.0.add(r * pxh + c) };
-                    }
-                    col[ny..].fill(zero);
-                }
-                self.col_fwd
-                    .process_with_scratch(&mut buf[..w * py], scratch);
-                for (t, c) in (c0..c1).enumerate() {
-                    let k = &self.spec[c * py..(c + 1) * py];
-                    for (v, &s) in buf[t * py..(t + 1) * py].iter_mut().zip(k) {
-                        *v *= s;
-                    }
-                }
-                self.col_inv
-                    .process_with_scratch(&mut buf[..w * py], scratch);
-                for (t, c) in (c0..c1).enumerate() {
-                    for r in 0..ny {
-                        // SAFETY: as above.
-                        unsafe { *hp.0.add(r * pxh + c) = buf[t * py + r] };
-                    }
-                }
-            },
-        );
-        // Rows: complex-to-real, keep the first nx values.
-        u.par_chunks_mut(nx)
-            .zip(half.par_chunks_mut(pxh))
-            .enumerate()
-            .for_each_init(
-                || (vec![0.0; px], self.c2r.make_scratch_vec()),
-                |(row, scratch), (i, (out, inp))| {
-                    if keep.is_some_and(|k| !k(i)) {
-                        out.fill(0.0);
-                        return;
-                    }
-                    // The DC and Nyquist terms of a real signal are real; drop round-off there.
-                    inp[0].im = 0.0;
-                    if px % 2 == 0 {
-                        inp[pxh - 1].im = 0.0;
-                    }
-                    self.c2r
-                        .process_with_scratch(inp, row, scratch)
-                        .expect("row FFT lengths are fixed by the plan");
-                    out.copy_from_slice(&row[..nx]);
-                },
-            );
+        self.fft.apply_on_rows(p, u, keep);
     }
 }
-
-#[derive(Clone, Copy)]
-struct SyncPtr(*mut Complex64);
-// SAFETY: used only to hand disjoint columns of one buffer to rayon tasks.
-unsafe impl Send for SyncPtr {}
-unsafe impl Sync for SyncPtr {}
 
 /// Dense reference product `u = C p` from the kernel table (O(N²); tests only).
 pub fn dense_apply(kernel: &Kernel, p: &[f64]) -> Vec<f64> {

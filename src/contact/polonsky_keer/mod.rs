@@ -171,7 +171,7 @@
 //! While the certificate is above [`Options::single_precision_above`] (default
 //! [`crate::contact::problem::DEFAULT_SINGLE_PRECISION_ABOVE`] `= 1e-4`), the products `C t`,
 //! `C d` and `C p` of the iteration are made by the operator's `f32` twin
-//! ([`crate::elastic::operator32::Operator32`]: the same transform with the kernel spectrum,
+//! ([`crate::elastic::transform::Operator32`]: the same transform with the kernel spectrum,
 //! the half spectrum and the FFTs in `f32`, relative error below `1e-6` of `max |u|`). Linear
 //! convergence takes 20–30 iterations from a warm start to a certificate of `1e-3`, and a
 //! product error of `~1e-6` is harmless while the certificate is far above it. When the

@@ -8,7 +8,7 @@ use rayon::prelude::*;
 
 use super::{CHUNK, SPARSE_MAX};
 use crate::elastic::operator::Operator;
-use crate::elastic::operator32::Operator32;
+use crate::elastic::transform::Operator32;
 
 /// `x > 0` and not NaN.
 #[inline]

@@ -1,66 +1,92 @@
-//! The influence operator `u = C p` of an [`Operator`] with its FFTs in single precision.
+//! The FFT product `u = C p` of a real kernel spectrum on an `ny × nx` field, in the float
+//! type `T` of its transforms: `f64` for [`Operator`], `f32` for its single-precision twin
+//! ([`Operator::single`]).
 //!
-//! The same transform as [`Operator`] — real row FFTs on the zero-padded rows, a fused column
-//! pass (gather a block of columns, forward FFT, multiply by the kernel spectrum, inverse FFT,
-//! scatter), inverse row FFTs, forward row FFTs of zero rows of `p` skipped — with the kernel
-//! spectrum, the half spectrum and every FFT in `f32`. Inputs and outputs stay `f64` slices,
-//! converted in the row passes. The result carries a relative error of order `1e-7·log₂ P`
-//! of the largest `|u|` (measured against the dense product: below `1e-6`), so it serves the
-//! early iterations of a contact solve, whose certificates are far above that; rustfft in
-//! `f32` runs about twice as fast as in `f64` for the lengths of a padded grid (2048–8192),
-//! and the column pass moves half the bytes. Each output value is computed by the same
-//! sequence of operations whatever the thread count.
+//! Real row FFTs on the zero-padded rows, then a fused column pass — gather a block of
+//! columns, forward FFT, multiply by the kernel spectrum, inverse FFT, scatter — so only `ny`
+//! rows of the half spectrum are ever stored; inverse row FFTs last. Inputs and outputs are
+//! `f64` slices, converted in the row passes. In `f32` the product carries a relative error of
+//! order `1e-7·log₂ P` of the largest `|u|` (measured against the dense product: below
+//! `1e-6`), which serves the early iterations of a contact solve, whose certificates are far
+//! above that; rustfft in `f32` runs about twice as fast as in `f64` for the lengths of a
+//! padded grid (2048–8192), and the column pass moves half the bytes. Every stage runs on
+//! rayon; each output value is computed by the same sequence of operations whatever the
+//! thread count.
+//!
+//! [`Operator`]: super::operator::Operator
+//! [`Operator::single`]: super::operator::Operator::single
 
 use std::sync::{Arc, Mutex};
 
 use rayon::prelude::*;
 use realfft::{ComplexToReal, RealFftPlanner, RealToComplex};
-use rustfft::num_complex::Complex32;
-use rustfft::{Fft, FftPlanner};
+use rustfft::num_complex::Complex;
+use rustfft::{Fft, FftNum, FftPlanner};
 
 use crate::alloc;
-use crate::elastic::operator::Operator;
 use crate::error::Result;
 
 /// Columns handled per rayon task in the fused column pass.
 const COLUMN_BLOCK: usize = 8;
 
-/// `u = C p` by `f32` FFTs for the grid and spectrum of an [`Operator`].
-pub struct Operator32 {
+/// The float type of a transform: an FFT number that converts from and to `f64`.
+pub trait Real: FftNum + Into<f64> {
+    /// `v` rounded to this type.
+    fn of(v: f64) -> Self;
+}
+
+impl Real for f64 {
+    #[inline(always)]
+    fn of(v: f64) -> f64 {
+        v
+    }
+}
+
+impl Real for f32 {
+    #[inline(always)]
+    fn of(v: f64) -> f32 {
+        v as f32
+    }
+}
+
+/// The product with `f32` transforms.
+pub type Operator32 = Transform<f32>;
+
+/// FFT plans, kernel spectrum and apply buffer of `u = C p` for an `ny × nx` grid
+/// transformed on `py × px`.
+pub struct Transform<T: Real> {
     ny: usize,
     nx: usize,
     py: usize,
     px: usize,
+    /// Half-spectrum width `px/2 + 1`.
     pxh: usize,
-    /// The operator's real spectrum rounded to `f32`, column-major over the half spectrum.
-    spec: Vec<f32>,
-    r2c: Arc<dyn RealToComplex<f32>>,
-    c2r: Arc<dyn ComplexToReal<f32>>,
-    col_fwd: Arc<dyn Fft<f32>>,
-    col_inv: Arc<dyn Fft<f32>>,
+    /// Real kernel spectrum, column-major over the half spectrum: `spec[c * py + r]`, already
+    /// divided by `py·px` (the inverse transforms are unnormalised).
+    pub(super) spec: Vec<T>,
+    pub(super) r2c: Arc<dyn RealToComplex<T>>,
+    c2r: Arc<dyn ComplexToReal<T>>,
+    pub(super) col_fwd: Arc<dyn Fft<T>>,
+    col_inv: Arc<dyn Fft<T>>,
     /// Scratch half spectrum of one apply (`ny × pxh`), kept between calls.
-    half: Mutex<Vec<Complex32>>,
+    half: Mutex<Vec<Complex<T>>>,
 }
 
-impl Operator32 {
-    /// The single-precision twin of `op`; `Error::TooLarge` when its buffers cannot be
-    /// allocated (the spectrum, `Py·(Px/2+1)` `f32`, and the half spectrum,
-    /// `ny·(Px/2+1)` complex `f32`: half the bytes of the operator's).
-    pub fn try_new(op: &Operator) -> Result<Self> {
-        let (ny, nx, py, px) = (op.ny, op.nx, op.py, op.px);
+impl<T: Real> Transform<T> {
+    /// Plans and the apply buffer (allocated here, so that `apply` never has to) for the
+    /// kernel spectrum `spec` (`py·(px/2+1)` values, or empty until the caller sets it);
+    /// `Error::TooLarge` when the buffer cannot be allocated.
+    pub(super) fn plan(ny: usize, nx: usize, py: usize, px: usize, spec: Vec<T>) -> Result<Self> {
         let pxh = px / 2 + 1;
-        let src = op.spectrum();
-        let mut spec: Vec<f32> = alloc::try_with_capacity(src.len(), "the f32 kernel spectrum")?;
-        spec.extend(src.iter().map(|&v| v as f32));
-        let cells = alloc::checked_cells(ny, pxh, "the f32 half spectrum")?;
+        let cells = alloc::checked_cells(ny, pxh, "the half spectrum")?;
         let half = alloc::try_filled(
             cells,
-            Complex32::new(0.0, 0.0),
-            &format!("the {ny} × {pxh} f32 half spectrum"),
+            Complex::new(T::zero(), T::zero()),
+            &format!("the {ny} × {pxh} half spectrum"),
         )?;
-        let mut rp = RealFftPlanner::<f32>::new();
-        let mut cp = FftPlanner::<f32>::new();
-        Ok(Operator32 {
+        let mut rp = RealFftPlanner::<T>::new();
+        let mut cp = FftPlanner::<T>::new();
+        Ok(Transform {
             ny,
             nx,
             py,
@@ -80,24 +106,30 @@ impl Operator32 {
         self.apply_rows(p, u, None);
     }
 
-    /// `u = C p` on the rows `i` with `keep(i)`; `u = 0` on the other rows.
+    /// `u = C p` on the rows `i` with `keep(i)`; `u = 0` on the other rows, whose inverse row
+    /// FFTs are skipped (the preconditioner, whose result is only used on the contact set).
     pub fn apply_on_rows(&self, p: &[f64], u: &mut [f64], keep: &(dyn Fn(usize) -> bool + Sync)) {
         self.apply_rows(p, u, Some(keep));
     }
 
+    /// `u = C p`, on every row or only on the rows `keep` selects. A row of `p` that is zero
+    /// has a zero row transform, so its forward row FFT is skipped (the iterates of a contact
+    /// solve vanish outside the contact set, often on whole rows).
     fn apply_rows(&self, p: &[f64], u: &mut [f64], keep: Option<&(dyn Fn(usize) -> bool + Sync)>) {
         let (ny, nx, py, px, pxh) = (self.ny, self.nx, self.py, self.px, self.pxh);
         assert_eq!(p.len(), ny * nx);
         assert_eq!(u.len(), ny * nx);
-        let zero = Complex32::new(0.0, 0.0);
+        let zero = Complex::new(T::zero(), T::zero());
+        // Rows: real-to-complex on the zero-padded row.
+        // The half spectrum is reused across calls: at 4097² a fresh 280 MB buffer per apply
+        // costs more in page faults than the FFTs. Every entry is overwritten below.
         let mut guard = self.half.lock().unwrap_or_else(|e| e.into_inner());
         if guard.len() != ny * pxh {
             *guard = vec![zero; ny * pxh];
         }
-        let half: &mut [Complex32] = &mut guard;
-        // Rows: f64 → f32, real-to-complex on the zero-padded row.
+        let half: &mut [Complex<T>] = &mut guard;
         half.par_chunks_mut(pxh).enumerate().for_each_init(
-            || (vec![0.0f32; px], self.r2c.make_scratch_vec()),
+            || (vec![T::zero(); px], self.r2c.make_scratch_vec()),
             |(row, scratch), (i, out)| {
                 let src = &p[i * nx..(i + 1) * nx];
                 if src.iter().all(|&v| v == 0.0) {
@@ -105,16 +137,17 @@ impl Operator32 {
                     return;
                 }
                 for (d, &s) in row[..nx].iter_mut().zip(src) {
-                    *d = s as f32;
+                    *d = T::of(s);
                 }
-                row[nx..].fill(0.0);
+                row[nx..].fill(T::zero());
                 self.r2c
                     .process_with_scratch(row, out, scratch)
                     .expect("row FFT lengths are fixed by the plan");
             },
         );
-        // Columns: fused forward FFT, multiply, inverse FFT on blocks of columns, each task
-        // owning a disjoint set of columns of `half`.
+        // Columns: fused forward FFT, multiply, inverse FFT, on blocks of columns. Each task
+        // owns a disjoint set of columns of `half`; the raw pointer hands that out without a
+        // transpose.
         let n_blocks = pxh.div_ceil(COLUMN_BLOCK);
         let half_ptr = SyncPtr(half.as_mut_ptr());
         (0..n_blocks).into_par_iter().for_each_init(
@@ -143,7 +176,7 @@ impl Operator32 {
                 for (t, c) in (c0..c1).enumerate() {
                     let k = &self.spec[c * py..(c + 1) * py];
                     for (v, &s) in buf[t * py..(t + 1) * py].iter_mut().zip(k) {
-                        *v *= s;
+                        *v = *v * s;
                     }
                 }
                 self.col_inv
@@ -156,26 +189,27 @@ impl Operator32 {
                 }
             },
         );
-        // Rows: complex-to-real, keep the first nx values as f64.
+        // Rows: complex-to-real, keep the first nx values.
         u.par_chunks_mut(nx)
             .zip(half.par_chunks_mut(pxh))
             .enumerate()
             .for_each_init(
-                || (vec![0.0f32; px], self.c2r.make_scratch_vec()),
+                || (vec![T::zero(); px], self.c2r.make_scratch_vec()),
                 |(row, scratch), (i, (out, inp))| {
                     if keep.is_some_and(|k| !k(i)) {
                         out.fill(0.0);
                         return;
                     }
-                    inp[0].im = 0.0;
+                    // The DC and Nyquist terms of a real signal are real; drop round-off there.
+                    inp[0].im = T::zero();
                     if px % 2 == 0 {
-                        inp[pxh - 1].im = 0.0;
+                        inp[pxh - 1].im = T::zero();
                     }
                     self.c2r
                         .process_with_scratch(inp, row, scratch)
                         .expect("row FFT lengths are fixed by the plan");
                     for (d, &s) in out.iter_mut().zip(&row[..nx]) {
-                        *d = s as f64;
+                        *d = s.into();
                     }
                 },
             );
@@ -183,16 +217,15 @@ impl Operator32 {
 }
 
 #[derive(Clone, Copy)]
-struct SyncPtr(*mut Complex32);
+struct SyncPtr<T>(*mut Complex<T>);
 // SAFETY: used only to hand disjoint columns of one buffer to rayon tasks.
-unsafe impl Send for SyncPtr {}
-unsafe impl Sync for SyncPtr {}
+unsafe impl<T> Send for SyncPtr<T> {}
+unsafe impl<T> Sync for SyncPtr<T> {}
 
 #[cfg(test)]
 mod tests {
-    use super::*;
     use crate::elastic::kernel::Kernel;
-    use crate::elastic::operator::dense_apply;
+    use crate::elastic::operator::{dense_apply, Operator};
 
     fn lcg(seed: u64, n: usize) -> Vec<f64> {
         let mut s = seed;
@@ -216,7 +249,7 @@ mod tests {
         for &(ny, nx) in &[(9usize, 9usize), (7, 12), (33, 17), (40, 40), (1, 6)] {
             let ker = Kernel::new(ny, nx, 0.3, 2.0);
             let op = Operator::free(&ker);
-            let op32 = Operator32::try_new(&op).unwrap();
+            let op32 = op.single().unwrap();
             let mut p = lcg((ny * 100 + nx) as u64, ny * nx);
             if ny > 4 {
                 p[2 * nx..4 * nx].fill(0.0);
@@ -246,7 +279,7 @@ mod tests {
         // p = cos(2π k x / L) along each axis → u = 2 p / (E* q), analytic.
         let (ny, nx, dx, e) = (24usize, 32usize, 0.25, 1.7);
         let op = Operator::periodic(ny, nx, dx, e);
-        let op32 = Operator32::try_new(&op).unwrap();
+        let op32 = op.single().unwrap();
         for (k, along_x) in [(3.0, true), (5.0, false)] {
             let (n, l) = if along_x { (nx, nx) } else { (ny, ny) };
             let q = 2.0 * std::f64::consts::PI * k / (l as f64 * dx);
@@ -271,7 +304,7 @@ mod tests {
     fn single_product_is_the_same_for_one_and_two_threads() {
         let ker = Kernel::new(37, 29, 0.5, 1.0);
         let op = Operator::free(&ker);
-        let op32 = Operator32::try_new(&op).unwrap();
+        let op32 = op.single().unwrap();
         let p = lcg(9, 37 * 29);
         let run = |threads: usize| {
             let pool = rayon::ThreadPoolBuilder::new()
