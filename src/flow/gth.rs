@@ -18,10 +18,10 @@
 //! few `n ε` however widely the conductances spread.
 //!
 //! The elimination order is the Cholesky solver's without its blocks on large pieces
-//! ([`super::direct::elimination_ordering`]).
+//! ([`super::order::elimination_ordering`]).
 
 use super::assemble::Stencil;
-use super::direct;
+use super::order;
 use crate::error::{Error, Result};
 
 /// The eliminated network: for each unknown in elimination order its pivot and the
@@ -65,7 +65,7 @@ impl Elimination {
                 what: format!("the cancellation-free elimination of {m} flow unknowns"),
             });
         }
-        let order = direct::elimination_ordering(st, &index, m);
+        let order = order::elimination_ordering(st, &index, m);
         // Position of each unknown in the order.
         let mut pos = vec![0u32; m];
         for (p, &u) in order.iter().enumerate() {

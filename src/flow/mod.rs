@@ -44,6 +44,7 @@ pub mod direct;
 pub mod gth;
 pub mod kept;
 pub mod multigrid;
+pub mod order;
 mod paths;
 
 use rayon::prelude::*;

@@ -876,7 +876,7 @@ fn the_order_is_a_permutation_of_the_unknowns_with_and_without_blocks() {
                     m += 1;
                 }
             }
-            let mut order = direct::ordering(&st, &index, m);
+            let mut order = order::ordering(&st, &index, m);
             assert_eq!(order.len(), m, "{ny}x{nx} periodic={periodic}");
             order.sort_unstable();
             assert!(order.iter().enumerate().all(|(q, &u)| q == u));
@@ -912,7 +912,7 @@ fn the_nested_dissection_is_a_permutation_and_gives_the_flow() {
                         m += 1;
                     }
                 }
-                let mut order = direct::nd_order(&st, &index, m);
+                let mut order = order::nd_order(&st, &index, m);
                 assert_eq!(order.len(), m, "{ny}x{nx} periodic={periodic}");
                 order.sort_unstable();
                 assert!(order.iter().enumerate().all(|(q, &u)| q == u));
