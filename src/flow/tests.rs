@@ -857,6 +857,29 @@ fn auto_uses_the_multigrid_when_the_factor_does_not_fit() {
     assert!(matches!(solve(&pr, &chol), Err(Error::TooLarge { .. })));
 }
 
+/// `order_of` orders every unknown of the stencil of conductances `c` exactly once.
+fn assert_orders_every_unknown(
+    c: &[f64],
+    ny: usize,
+    nx: usize,
+    periodic: bool,
+    order_of: fn(&assemble::Stencil, &[usize], usize) -> Vec<usize>,
+) {
+    let (st, _) = assemble::fine_stencil(c, ny, nx, periodic);
+    let mut index = vec![usize::MAX; ny * nx];
+    let mut m = 0;
+    for (k, slot) in index.iter_mut().enumerate() {
+        if st.active[k] {
+            *slot = m;
+            m += 1;
+        }
+    }
+    let mut order = order_of(&st, &index, m);
+    assert_eq!(order.len(), m, "{ny}x{nx} periodic={periodic}");
+    order.sort_unstable();
+    assert!(order.iter().enumerate().all(|(q, &u)| q == u));
+}
+
 #[test]
 fn the_order_is_a_permutation_of_the_unknowns_with_and_without_blocks() {
     // 7 × 9 and 40 × 30 are ordered by 2 × 2 blocks, 150 × 150 cell by cell; about a third
@@ -867,19 +890,7 @@ fn the_order_is_a_permutation_of_the_unknowns_with_and_without_blocks() {
                 .into_iter()
                 .map(|u| if u < 0.35 { 0.0 } else { u })
                 .collect();
-            let (st, _) = assemble::fine_stencil(&c, ny, nx, periodic);
-            let mut index = vec![usize::MAX; ny * nx];
-            let mut m = 0;
-            for (k, slot) in index.iter_mut().enumerate() {
-                if st.active[k] {
-                    *slot = m;
-                    m += 1;
-                }
-            }
-            let mut order = order::ordering(&st, &index, m);
-            assert_eq!(order.len(), m, "{ny}x{nx} periodic={periodic}");
-            order.sort_unstable();
-            assert!(order.iter().enumerate().all(|(q, &u)| q == u));
+            assert_orders_every_unknown(&c, ny, nx, periodic, order::ordering);
         }
     }
 }
@@ -903,19 +914,7 @@ fn the_nested_dissection_is_a_permutation_and_gives_the_flow() {
                     .into_iter()
                     .map(|u| if u < closed { 0.0 } else { u })
                     .collect();
-                let (st, _) = assemble::fine_stencil(&c, ny, nx, periodic);
-                let mut index = vec![usize::MAX; ny * nx];
-                let mut m = 0;
-                for (k, slot) in index.iter_mut().enumerate() {
-                    if st.active[k] {
-                        *slot = m;
-                        m += 1;
-                    }
-                }
-                let mut order = order::nd_order(&st, &index, m);
-                assert_eq!(order.len(), m, "{ny}x{nx} periodic={periodic}");
-                order.sort_unstable();
-                assert!(order.iter().enumerate().all(|(q, &u)| q == u));
+                assert_orders_every_unknown(&c, ny, nx, periodic, order::nd_order);
             }
         }
     }
