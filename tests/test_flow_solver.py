@@ -77,6 +77,25 @@ def near_threshold_gap(seed: int) -> tuple[np.ndarray, np.ndarray]:
     return best
 
 
+def test_a_looser_tol_keeps_the_factors_first_answer_within_it():
+    # A gap whose factored answer has a first-order rate error of ~1.4e-12: the default tol
+    # (1e-12) refines it in two doubles, tol=1e-9 keeps it (docs/flow.md, "Accuracy").
+    s = leakpath.spectral(256, 0.8, seed=0, rms_height=1.0)
+    g0 = s.heights.max() - s.heights
+    g = g0 - np.quantile(g0, 0.4)
+    contact = g <= 0
+    gap = np.where(contact, 0.0, g)
+    tight = leakpath.flow(gap, dx=1.0, contact=contact)
+    loose = leakpath.flow(gap, dx=1.0, contact=contact, tol=1e-9)
+    assert tight.solver == loose.solver == "cholesky"
+    # Refined: the residual of two doubles; kept: the residual of one.
+    assert tight.residual < 1e-20 < loose.residual < 1e-9
+    q = oracle_rate(gap, contact)
+    assert abs(tight.flow_rate - q) <= 1e-9 * q
+    assert 0 < abs(loose.flow_rate - tight.flow_rate) <= 1e-9 * tight.flow_rate
+    assert abs(loose.inlet_flow_rate - loose.flow_rate) <= 1e-9 * loose.flow_rate
+
+
 @pytest.mark.parametrize("seed", [0, 1, 2])
 @pytest.mark.parametrize("solver", ["auto", "cholesky", "multigrid"])
 def test_contact_gap_near_threshold_matches_spsolve(seed, solver):

@@ -16,6 +16,7 @@ import pytest
 
 import leakpath
 from leakpath import CheckpointMismatch, leakage, sweep
+from leakpath.leakage import FLOW_TOL
 from leakpath._table import COLUMNS
 from leakpath.contact import ContactProblem
 from leakpath.errors import InvalidArgumentError
@@ -60,8 +61,9 @@ def test_columns_equal_flow_on_each_levels_own_fields():
     for k, row in enumerate(r.rows):
         p, g = r.fields["pressure"][k], r.fields["gap"][k]
         f = leakpath.flow(
-            np.maximum(g, 0.0), dx=s.dx, contact=p > 0, axis=1, periodic=True
+            np.maximum(g, 0.0), dx=s.dx, contact=p > 0, axis=1, periodic=True, tol=FLOW_TOL
         )
+        assert r.parameters["flow_tol"] == FLOW_TOL
         assert row["Q"] == f.flow_rate
         assert row["K"] == f.permeability
         # Q > 0 exactly when the open region spans axis 1 (same 4-connectivity).

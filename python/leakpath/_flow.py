@@ -283,13 +283,17 @@ def flow(
         periodic: wrap across the flow; ``None``: the state's ``boundary == "periodic"``
             (no wrap for a gap array).
         contact: contact mask for a gap array (bool, the gap's shape); default ``gap ≤ 0``.
-        tol: relative residual ``‖b − Ax‖₂/‖b‖₂`` (default 1e-12).
+        tol: accuracy of the flow rate (default 1e-12): multigrid iterates until the
+            relative residual ``‖b − Ax‖₂/‖b‖₂`` and the rate's first-order error are below
+            it; Cholesky keeps its answer when the rate's first-order error is at most
+            ``max(tol, 1e-12)`` of the rate.
         max_iter: conjugate-gradient iterations allowed (default 20000).
         memory_limit: bytes allowed, a positive integer (default: what this process may
             still allocate, :func:`leakpath._memory.memory_limit`).
         solver: ``"cholesky"`` (sparse Cholesky; the answer's residuals are summed in
             double-double arithmetic and it is kept when each rate's first-order error
-            ``ψ·(b_in − Aφ)``, ``φ·(b_out − Aψ)`` is at most 1e-12 of the rate, else refined
+            ``ψ·(b_in − Aφ)``, ``φ·(b_out − Aψ)`` is at most ``max(tol, 1e-12)`` of the
+            rate, else refined
             with the factor as two doubles per pressure, else solved by a cancellation-free
             elimination up to 2^20 unknowns), ``"multigrid"`` (conjugate gradients
             preconditioned by classical algebraic multigrid, refined on exact residuals

@@ -543,6 +543,7 @@ def sweep(
     # Polonsky–Keer solves stop at SOLVE_TOL; the exact solvers keep their own criterion.
     solve_tol = SOLVE_TOL if uses_pk or mean_pressures is not None else None
     parameters["solve_tol"] = solve_tol
+    parameters["flow_tol"] = leakage.FLOW_TOL if flow_on else None
     ref_mom = nayak_moments(surface.heights, surface.dx)
     reference = {
         "h_s": surface.height_range,

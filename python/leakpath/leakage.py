@@ -97,6 +97,16 @@ def flow_axis_for(flow_axis: Any, axis: Any) -> int:
     return _validate.flow_axis(flow_axis, "flow_axis")
 
 
+#: Tolerance of each level's flow (:func:`leakpath.flow`'s ``tol``): the factored answer is
+#: kept when each rate's first-order error, from the exact residuals, is at most this
+#: fraction of the rate (docs/flow.md, "Accuracy"), and the multigrid iterates to it. The
+#: level's contact certificate (``leakpath._sweep.SOLVE_TOL``) leaves the rate uncertain
+#: by more: certificates of 1e-10 and 1e-9 give rates up to 4.5e-8 apart. The single
+#: flow's default, 1e-12, refines the factor's answer in two doubles on many contact gaps
+#: (2049², RMD D = 2.2: rate errors 2.4e-12 at Δ = 0.5 h_s, 5.8e-10 at Δ = h_s), one more
+#: two-column solve and two exact residuals, 1.2–1.6 s of a 9–10 s flow.
+FLOW_TOL = 1e-9
+
 #: Grids of at least this many cells pass the factor's analysis from level to level
 #: (:class:`leakpath._core.FlowAnalysis`'s default ``min_cells``).
 ANALYSIS_MIN_CELLS = 1 << 20
@@ -121,11 +131,11 @@ def _timed_columns(
     analysis: _core.FlowAnalysis | None = None,
 ) -> tuple[dict[str, float], float]:
     """``({"Q": …, "K": …}, seconds)`` of :func:`leakpath.flow` on ``state`` along
-    ``flow_axis`` with ``η = Δp = 1``, on the factor analysis kept in ``analysis`` when it
-    fits (docs/flow.md)."""
+    ``flow_axis`` with ``η = Δp = 1`` to :data:`FLOW_TOL`, on the factor analysis kept in
+    ``analysis`` when it fits (docs/flow.md)."""
     t0 = time.perf_counter()
     with kept_analysis(analysis):
-        f = flow(state, axis=flow_axis, threads=threads)
+        f = flow(state, axis=flow_axis, threads=threads, tol=FLOW_TOL)
     cols = {"Q": float(f.flow_rate), "K": float(f.permeability)}
     return cols, time.perf_counter() - t0
 

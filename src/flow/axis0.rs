@@ -152,15 +152,18 @@ pub(super) fn solve_axis0(
     let direct_answer = match factor {
         None => None,
         Some(f) => {
+            let trust = paths::direct_trust(opts.tol);
             let trusted = f.ok().and_then(|mut f| {
                 let t0 = std::time::Instant::now();
                 let a = solve_direct(&mut f, &fine, &rhs, &b_out);
                 let t_solve = cg::secs(t0);
                 let t0 = std::time::Instant::now();
-                let ok = trusted(&rhs, &b_out, &a);
+                let ok = trusted(&rhs, &b_out, &a, trust);
                 if prof {
+                    let (_, (e_out, e_in)) = paths::rate_errors(&rhs, &b_out, &a);
                     eprintln!(
-                        "flow: solve and residuals {t_solve:.3} s, checks {:.3} s ({})",
+                        "flow: solve and residuals {t_solve:.3} s, checks {:.3} s ({}; rate \
+                         errors {e_out:.1e}, {e_in:.1e}, kept at {trust:.0e})",
                         cg::secs(t0),
                         if ok { "trusted" } else { "refining" }
                     );
@@ -169,11 +172,13 @@ pub(super) fn solve_axis0(
                     return Some(a);
                 }
                 let t0 = std::time::Instant::now();
-                let a = split_direct(&mut f, &fine, &rhs, &b_out, a);
-                let ok = trusted(&rhs, &b_out, &a);
+                let a = split_direct(&mut f, &fine, &rhs, &b_out, a, trust);
+                let ok = trusted(&rhs, &b_out, &a, trust);
                 if prof {
+                    let (_, (e_out, e_in)) = paths::rate_errors(&rhs, &b_out, &a);
                     eprintln!(
-                        "flow: refinement in two doubles and checks {:.3} s ({})",
+                        "flow: refinement in two doubles and checks {:.3} s ({}; rate errors \
+                         {e_out:.1e}, {e_in:.1e})",
                         cg::secs(t0),
                         if ok { "trusted" } else { "refused" }
                     );

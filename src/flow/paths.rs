@@ -93,6 +93,7 @@ pub(super) fn split_direct(
     b_in: &[f64],
     b_out: &[f64],
     mut a: DirectAnswer,
+    trust: f64,
 ) -> DirectAnswer {
     let n = b_in.len();
     a.lo = (vec![0.0; n], vec![0.0; n]);
@@ -107,7 +108,7 @@ pub(super) fn split_direct(
         a.rel_x = relative(&a.r_x, b_in);
         a.rel_psi = relative(&a.r_psi, b_out);
         let halved = a.rel_x <= 0.5 * before.0 || a.rel_psi <= 0.5 * before.1;
-        if trusted(b_in, b_out, &a) || !halved {
+        if trusted(b_in, b_out, &a, trust) || !halved {
             break;
         }
     }
@@ -115,34 +116,61 @@ pub(super) fn split_direct(
 }
 
 /// Largest first-order error of a flow rate, relative to the rate, at which the factor's
-/// answer is kept.
+/// answer is kept, whatever the caller's `tol` ([`direct_trust`]).
 pub(super) const DIRECT_TRUST: f64 = 1e-12;
+
+/// The relative rate error at which a factored answer is kept for a caller's `tol`:
+/// `max(tol, DIRECT_TRUST)`. A sweep, whose contact certificate leaves the rate uncertain
+/// far above 1e-12, passes a larger `tol` and is spared the refinement in two doubles
+/// (one more two-column solve and two exact residuals) that the default would need on
+/// many contact gaps.
+pub(super) fn direct_trust(tol: f64) -> f64 {
+    tol.max(DIRECT_TRUST)
+}
+
+/// `w · v` for a vector carried in one double (`lo` empty) or two (`v + lo`).
+fn dot_split(w: &[f64], v: &[f64], lo: &[f64]) -> f64 {
+    if lo.is_empty() {
+        cg::dot(w, v)
+    } else {
+        cg::dot(w, v) + cg::dot(w, lo)
+    }
+}
+
+/// The two rates `Q_out = b_out · φ`, `Q_in = b_in · ψ` and their first-order errors relative
+/// to them, `|ψ · (b_in − A φ)| / Q_out` and `|φ · (b_out − A ψ)| / Q_in` (the errors infinite
+/// when a rate is not positive and finite).
+pub(super) fn rate_errors(
+    b_in: &[f64],
+    b_out: &[f64],
+    a: &DirectAnswer,
+) -> ((f64, f64), (f64, f64)) {
+    let (xlo, psilo) = (&a.lo.0, &a.lo.1);
+    let (q_out, q_in) = (dot_split(b_out, &a.x, xlo), dot_split(b_in, &a.psi, psilo));
+    if !(q_out.is_finite() && q_in.is_finite() && q_out > 0.0 && q_in > 0.0) {
+        return ((q_out, q_in), (f64::INFINITY, f64::INFINITY));
+    }
+    let e_out = dot_split(&a.r_x, &a.psi, psilo).abs() / q_out;
+    let e_in = dot_split(&a.r_psi, &a.x, xlo).abs() / q_in;
+    ((q_out, q_in), (e_out, e_in))
+}
 
 /// Whether the refined factor's `φ` (inlet at 1) and `ψ` (outlet at 1), with their low parts
 /// when split, can be returned: both rates positive and finite, every pressure in `[0, 1]`
 /// (the maximum principle) to round-off, the first-order errors of the rates from the exact
-/// residuals, `ψ · (b_in − A φ)` and `φ · (b_out − A ψ)`, at most [`DIRECT_TRUST`] of them,
+/// residuals, `ψ · (b_in − A φ)` and `φ · (b_out − A ψ)`, at most `trust` of them
+/// ([`direct_trust`]),
 /// and the rates agreeing to [`FLUX_AGREEMENT`]. The factor of the rounded matrix fails this
 /// when a region is joined to the rest only through faces below `ε` of its own
 /// (conductances spanning some sixteen decades or more).
-pub(super) fn trusted(b_in: &[f64], b_out: &[f64], a: &DirectAnswer) -> bool {
+pub(super) fn trusted(b_in: &[f64], b_out: &[f64], a: &DirectAnswer, trust: f64) -> bool {
+    let ((q_out, q_in), (e_out, e_in)) = rate_errors(b_in, b_out, a);
+    if !(e_out.is_finite() && e_in.is_finite()) || !rates_agree(q_in, q_out) {
+        return false;
+    }
     let (x, psi) = (&a.x, &a.psi);
     let (xlo, psilo) = (&a.lo.0, &a.lo.1);
     let split = !xlo.is_empty();
-    let rate = |w: &[f64], hi: &[f64], lo: &[f64]| {
-        if split {
-            cg::dot(w, hi) + cg::dot(w, lo)
-        } else {
-            cg::dot(w, hi)
-        }
-    };
-    let (q_out, q_in) = (rate(b_out, x, xlo), rate(b_in, psi, psilo));
-    if !(q_out.is_finite() && q_in.is_finite() && q_out > 0.0 && q_in > 0.0) {
-        return false;
-    }
-    if !rates_agree(q_in, q_out) {
-        return false;
-    }
     let in_range = |v: &[f64], lo: &[f64]| {
         v.par_iter().enumerate().all(|(k, &t)| {
             let t = if split { t + lo[k] } else { t };
@@ -152,9 +180,7 @@ pub(super) fn trusted(b_in: &[f64], b_out: &[f64], a: &DirectAnswer) -> bool {
     if !(in_range(x, xlo) && in_range(psi, psilo)) {
         return false;
     }
-    let e_out = rate(&a.r_x, psi, psilo);
-    let e_in = rate(&a.r_psi, x, xlo);
-    e_out.abs() <= DIRECT_TRUST * q_out && e_in.abs() <= DIRECT_TRUST * q_in
+    e_out <= trust && e_in <= trust
 }
 
 /// `φ`, `ψ`, the larger relative residual, and the low parts of `φ` and `ψ`.

@@ -1119,8 +1119,11 @@ fn split_refinement_matches_the_elimination_near_threshold() {
         assert!(rel(q_ref, q_ref_in) < 1e-13);
         let mut f = direct::Factor::new(&st, None).unwrap();
         let a = paths::solve_direct(&mut f, &st, &b_in, &b_out);
-        let a = paths::split_direct(&mut f, &st, &b_in, &b_out, a);
-        assert!(paths::trusted(&b_in, &b_out, &a), "seed {seed}");
+        let a = paths::split_direct(&mut f, &st, &b_in, &b_out, a, paths::DIRECT_TRUST);
+        assert!(
+            paths::trusted(&b_in, &b_out, &a, paths::DIRECT_TRUST),
+            "seed {seed}"
+        );
         assert!(
             a.residual() < 1e-16,
             "seed {seed}: residual {:e}",

@@ -31,7 +31,7 @@ from matplotlib.colors import LogNorm
 from matplotlib.figure import Figure
 
 from .. import _validate
-from .._flow import Flow, flow
+from .._flow import DEFAULT_TOL, Flow, flow
 from ..errors import InvalidArgumentError
 from ._types import SweepLike as SweepResult
 
@@ -106,10 +106,14 @@ def level_flow(result: SweepResult, k: int) -> Flow:
     fields, or by solving the level again."""
     axis = int(result.parameters.get("flow_axis", 0))
     periodic = result.parameters.get("boundary") == "periodic"
+    # The sweep's own flow tolerance (leakpath.leakage.FLOW_TOL), so the map is its row's flow.
+    tol = result.parameters.get("flow_tol") or DEFAULT_TOL
     if result.fields is not None:
         gap = np.maximum(result.fields["gap"][k], 0.0)
         contact = result.fields["pressure"][k] > 0
-        return flow(gap, dx=result.surface.dx, contact=contact, axis=axis, periodic=periodic)
+        return flow(
+            gap, dx=result.surface.dx, contact=contact, axis=axis, periodic=periodic, tol=tol
+        )
     from ..contact import ContactProblem
 
     par = result.parameters
@@ -132,7 +136,7 @@ def level_flow(result: SweepResult, k: int) -> Flow:
         # The unloading rows are solved on the permanent surface of the last loading row.
         top = max(i for i, r in enumerate(result.rows) if r.get("branch") == "loading")
         prob = prob.unloading(solve_row(prob, result.rows[top]))
-    return flow(solve_row(prob, row), axis=axis)
+    return flow(solve_row(prob, row), axis=axis, tol=tol)
 
 
 def plot_flux_map(
