@@ -16,10 +16,10 @@ import pytest
 
 import leakpath
 from leakpath import CheckpointMismatch, leakage, sweep
-from leakpath.leakage import FLOW_TOL
 from leakpath._table import COLUMNS
 from leakpath.contact import ContactProblem
 from leakpath.errors import InvalidArgumentError
+from leakpath.leakage import FLOW_TOL
 from leakpath.surfaces import Surface
 
 

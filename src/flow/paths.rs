@@ -165,7 +165,7 @@ pub(super) fn rate_errors(
 /// (conductances spanning some sixteen decades or more).
 pub(super) fn trusted(b_in: &[f64], b_out: &[f64], a: &DirectAnswer, trust: f64) -> bool {
     let ((q_out, q_in), (e_out, e_in)) = rate_errors(b_in, b_out, a);
-    if !(e_out.is_finite() && e_in.is_finite()) || !rates_agree(q_in, q_out) {
+    if !(e_out.is_finite() && e_in.is_finite() && rates_agree(q_in, q_out)) {
         return false;
     }
     let (x, psi) = (&a.x, &a.psi);
