@@ -9,8 +9,9 @@ use crate::grid::Boundary;
 
 /// Default KKT tolerance, relative to the height range.
 pub const DEFAULT_TOL: f64 = 1e-12;
-/// Default of [`Options::single_precision_above`]: Polonsky–Keer's FFT products are made in
-/// single precision while its certificate is above this level.
+/// Default of [`Options::single_precision_above`]: Polonsky–Keer's FFT products are all made
+/// in single precision while its certificate is above this level, and only its increments
+/// below it.
 pub const DEFAULT_SINGLE_PRECISION_ABOVE: f64 = 1e-4;
 
 /// `Solver::Auto` uses the exact block active set on grids of at most this many points and
@@ -176,9 +177,11 @@ pub struct Options<'a> {
     /// Polonsky–Keer iteration unchanged. Polonsky–Keer only ([`Solver::resolve`]).
     pub hardness: Option<f64>,
     /// Polonsky–Keer: while the certificate is above this level, the FFT products are made in
-    /// single precision ([`crate::elastic::transform::Operator32`]); below it, a fresh
-    /// double-precision product and double precision to the end. `0` (or any level `≤ tol`):
-    /// double precision throughout. The answer is the same to the certificate.
+    /// single precision ([`crate::elastic::transform::Operator32`]); below it, the full
+    /// products `u = C p` are made in double precision (one at the switch, then one each
+    /// time the certificate has fallen a hundredfold, and one to confirm convergence) and
+    /// the increments `C t` stay single. `0` (or any level `≤ tol`): double precision
+    /// throughout. The answer is the same to the certificate.
     pub single_precision_above: f64,
 }
 

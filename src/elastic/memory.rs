@@ -28,7 +28,7 @@ pub fn operator(ny: usize, nx: usize, boundary: Boundary) -> u64 {
 
 /// Peak bytes of a Polonsky–Keer solve ([`crate::contact::polonsky_keer::solve`]) on an `ny × nx` grid: the larger of building the operator (free:
 /// kernel table, padded kernel and its half spectrum) and iterating (kernel spectrum, the
-/// operator's half-spectrum buffer and their `f32` twins, six `N`-vectors `p, u, g, t, r` and the influence table
+/// operator's half-spectrum buffer, the preconditioner's, and their `f32` twins, six `N`-vectors `p, u, g, t, r` and the influence table
 /// of the sparse corrections), plus one copy of the heights (the bindings copy non-contiguous
 /// input) and a margin for the coarse-to-fine start.
 pub fn polonsky_keer(ny: usize, nx: usize, boundary: Boundary) -> u64 {
@@ -58,8 +58,13 @@ pub fn polonsky_keer(ny: usize, nx: usize, boundary: Boundary) -> u64 {
         .saturating_mul(8)
         .saturating_add((ny as u64).saturating_mul(qxh).saturating_mul(16))
         .saturating_add(n.saturating_mul(8));
-    // The operator's f32 twin of the early iterations: half the bytes of spectrum and apply.
-    let single = spec.saturating_add(apply) / 2;
+    // The f32 twins of the operator and of the preconditioner's transform: half the bytes of
+    // their spectra and apply buffers.
+    let pre_transform = qy
+        .saturating_mul(qxh)
+        .saturating_mul(8)
+        .saturating_add((ny as u64).saturating_mul(qxh).saturating_mul(16));
+    let single = spec.saturating_add(apply).saturating_add(pre_transform) / 2;
     let iterate = spec
         .saturating_add(apply)
         .saturating_add(single)

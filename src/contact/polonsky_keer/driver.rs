@@ -48,6 +48,11 @@ pub(super) enum Begin<'a> {
 }
 
 /// The iteration from `begin`.
+/// Below the switch level, `u = C p` is refreshed in `f64` once the certificate has fallen
+/// this factor below its value at the previous refresh (the `f32` increments between two
+/// refreshes move `g` by about `1e-6` of their own size).
+pub(super) const REFRESH_RATIO: f64 = 1e-2;
+
 pub(super) fn run(
     op: &Operator,
     table: Option<&[f64]>,
@@ -131,6 +136,7 @@ pub(super) fn run(
     };
     let mut w = Work {
         op,
+        single_full: single.is_some(),
         single,
         single_applies: 0,
         h,
@@ -169,6 +175,10 @@ pub(super) fn run(
     };
     if opts.precondition {
         let pre = Operator::inverse_compliance(ny, nx, problem.dx, problem.e_star)?;
+        if w.single.is_some() {
+            // Its f32 twin, used beside the operator's (`Work::precondition`).
+            pre.single()?;
+        }
         w.pre = Some(pre);
         w.z = alloc::try_zeroed(n, "the preconditioned residual")?;
     }
@@ -194,6 +204,9 @@ pub(super) fn run(
     }
     let (mut state, mut delta) = w.evaluate(mode);
     let mut fresh = true;
+    // Below the switch level the increments C t stay in f32 and u = C p is refreshed in f64
+    // each time the certificate has fallen REFRESH_RATIO below its value at the last refresh.
+    let mut refreshed_at = f64::INFINITY;
 
     let mut it = 0usize;
     let mut cg = false; // the paper's δ
@@ -216,23 +229,32 @@ pub(super) fn run(
         }
         best_cert = best_cert.min(cert);
         if cert <= opts.tol {
-            if (fresh && w.single.is_none()) || finish == Finish::Incremental {
+            if (fresh && !(w.single.is_some() && w.single_full)) || finish == Finish::Incremental {
                 break;
             }
             // Converged on the incrementally updated u (or on f32 products): confirm on a
             // fresh f64 product.
-            w.single = None;
+            w.single_full = false;
             w.refresh_u();
             (state, delta) = w.evaluate(mode);
             fresh = true;
+            refreshed_at = state.certificate() / scale_at(delta);
             continue;
         }
-        if w.single.is_some() && cert <= switch {
-            // Below the switch level: a fresh f64 product, and f64 from here on.
-            w.single = None;
+        if w.single.is_some() && w.single_full && cert <= switch {
+            // Below the switch level: a fresh f64 product; f64 full products from here on.
+            w.single_full = false;
             w.refresh_u();
             (state, delta) = w.evaluate(mode);
             fresh = true;
+            refreshed_at = state.certificate() / scale_at(delta);
+            continue;
+        }
+        if w.single.is_some() && !w.single_full && !fresh && cert <= REFRESH_RATIO * refreshed_at {
+            w.refresh_u();
+            (state, delta) = w.evaluate(mode);
+            fresh = true;
+            refreshed_at = state.certificate() / scale_at(delta);
             continue;
         }
         if it >= max_iter || !cert.is_finite() {

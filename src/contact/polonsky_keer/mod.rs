@@ -161,12 +161,13 @@
 //! The preconditioner cannot share the transform of the step's product `C t`: it acts on `g`
 //! restricted to `I_c`, and the restriction does not commute with the transform (updating
 //! `M χ g` by `−τ M χ C t` needs the transform of `χ C t`, a second pair anyway). Its pairs are
-//! counted apart ([`Solution::preconditioner_products`]); at 2049², free, `Δ = 0.3 h_s` (RMD
+//! counted apart ([`Solution::preconditioner_products`]) and made in `f32` alongside the
+//! operator's `f32` products ("Single-precision products" below); at 2049², free, `Δ = 0.3 h_s` (RMD
 //! D = 2.2, tol 1e-8) 71 pairs on the 2160² grid (73.3 with the coarse levels' share), about
 //! 20 products of the 4096² padded grid by transform size, next to 92.9 products
 //! (`benchmarks/results/contact_scale.md`).
 //!
-//! # Single-precision products in the early iterations
+//! # Single-precision products
 //!
 //! While the certificate is above [`Options::single_precision_above`] (default
 //! [`crate::contact::problem::DEFAULT_SINGLE_PRECISION_ABOVE`] `= 1e-4`), the products `C t`,
@@ -176,14 +177,47 @@
 //! convergence takes 20–30 iterations from a warm start to a certificate of `1e-3`, and a
 //! product error of `~1e-6` is harmless while the certificate is far above it. When the
 //! certificate falls to the switch level (or to `tol`, if that is higher), `u = C p` is
-//! recomputed in `f64` and the iteration continues in `f64` to the end, so the convergence
-//! test on a fresh product, the returned fields and the certificate are double precision as
-//! without the switch (the tests find identical contact sets). The sparse corrections use the
-//! `f64` influence table throughout. [`Solution::single_products`] counts the `f32` products
-//! (included in `fft_products`). A switch level `≤ tol` (e.g. `0`) turns it off; so does a
-//! finishing tolerance above the level.
+//! recomputed in `f64`.
 //!
-//! What it bought, cold free solves of RMD D = 2.2 seed 0 (`h_s` = range, tol 1e-8, coarse
+//! Below the switch level only the full products `u = C p` are `f64`; the increments `C t`
+//! (`C d` of a chord step) stay `f32`. An increment's error is about `1e-6` of the increment
+//! itself, not of `u`: after a fresh `f64` product at certificate `c₀` the remaining steps
+//! move the gap by some `c₀ h_s` in all, so the `f32` increments leave it within about
+//! `1e-6 · c₀ h_s` of the gap a fresh product would give, and each fresh product starts
+//! again from the exact `u`. `u = C p` is made afresh in `f64` each time the certificate has
+//! fallen [`driver::REFRESH_RATIO`] `= 10⁻²` below its value at the previous fresh product
+//! (at `1e-4`, `1e-6`, `1e-8` from the default switch), which keeps that drift near
+//! `1e-12 h_s` below a certificate of `1e-6` and `1e-14 h_s` below `1e-8`. The convergence test is always
+//! made on a fresh `f64` product, so the returned fields and the certificate are double
+//! precision as without the switch. The sparse corrections use the `f64` influence table
+//! throughout. [`Solution::single_products`] counts the `f32` products (included in
+//! `fft_products`). A switch level `≤ tol` (e.g. `0`) turns both off; so does a finishing
+//! tolerance above the level.
+//!
+//! With the operator's twin in use, the preconditioner's products (the inverse compliance,
+//! `Work::precondition` in `passes.rs`) are made by its own `f32` twin too, above and below the
+//! switch: an approximate preconditioner changes the rate a little, not the answer, and
+//! the certificate is still that of `f64` products.
+//!
+//! What the `f32` increments below the switch and the `f32` preconditioner bought, 20-level
+//! RMD sweeps (D = 2.2, seed 0, free, the sweep's certificate `1e-9`, no flow; one process
+//! each, one after the other on an idle machine; CPU s by `time.process_time`, iterations):
+//!
+//! | grid | before | `f32` increments | `f32` preconditioner | both |
+//! |---|---|---|---|---|
+//! | 513² | 10.2 s, 1018 | 9.2 s, 1016 | | |
+//! | 1025² | 69.3 s, 1393 | 60.9 s, 1390 | 62.0 s, 1382 | 58.1 s, 1382 |
+//! | 2049² | 417.4 s, 1962 (220.4 s wall) | | | 365.8 s, 1964 (194.6 s wall) |
+//!
+//! Loads within 3.1e-9 relative and free volumes within 1.8e-9 of the sweep before (the
+//! certificate's bound, `docs/conventions.md`), contact counts identical at every level (2049²).
+//! A single warm level is a noisier measure: the iteration count of one solve moves by tens
+//! either way with the rounding (2049², Δ = 0.45 → 0.5 h_s from the previous pressure: 112
+//! iterations before, 113–146 with `f32` increments depending on the refresh ratio, 116 in
+//! `f64` throughout).
+//!
+//! What the early `f32` products bought (before the increments below the switch were `f32`
+//! too), cold free solves of RMD D = 2.2 seed 0 (`h_s` = range, tol 1e-8, coarse
 //! start; CPU seconds by `time.process_time`, machine shared, load average 5.7–6.1, one run
 //! each; iterations / products (of which f32) / CPU s):
 //!
@@ -209,10 +243,11 @@
 //! without the flow against 82.6 s with `f64` products (−5 %), 154.2 against 154.7 s with it
 //! (`benchmarks/results/sweep_scale.md`).
 //!
-//! Tried and not kept: the preconditioner products (inverse compliance) in `f32` during the
-//! same phase. At 1025², switch 1e-4: Δ = 0.3 h_s 54 iterations, 2.65 s CPU (2.56 s with
-//! the `f64` preconditioner); Δ = 0.6 h_s 68 iterations, 3.60 s (65 iterations, 3.61 s): no
-//! saving and more iterations, so the preconditioner stays `f64`.
+//! The `f32` preconditioner was first tried in the early phase alone, on single cold solves
+//! on a shared machine (1025², switch 1e-4: Δ = 0.3 h_s 54 iterations, 2.65 s CPU against
+//! 2.56 s with the `f64` preconditioner; Δ = 0.6 h_s 68 iterations, 3.60 s against 65,
+//! 3.61 s) and looked like no saving; over whole sweeps, with the `f32` increments, it saves
+//! 5 % (table above).
 //!
 //! # Convergence
 //!

@@ -150,6 +150,9 @@ pub(super) struct Work<'a> {
     /// While set, the products `C t` and `C p` of the iteration use this `f32` twin of `op`
     /// (the early iterations, see the module documentation).
     pub(super) single: Option<&'a Operator32>,
+    /// Whether the full products `C p` use `single` too (above the switch level); below it
+    /// only the increments `C t` do, and `u = C p` is refreshed in `f64`.
+    pub(super) single_full: bool,
     /// Products made by `single` (included in `applies`).
     pub(super) single_applies: usize,
     pub(super) h: &'a [f64],
@@ -219,11 +222,11 @@ impl Work<'_> {
             &mut self.u
         };
         match self.single {
-            Some(s) => {
+            Some(s) if self.single_full => {
                 s.apply(&self.p, u);
                 self.single_applies += 1;
             }
-            None => self.op.apply(&self.p, u),
+            _ => self.op.apply(&self.p, u),
         }
         self.applies += 1;
     }
@@ -353,12 +356,17 @@ impl Work<'_> {
         // z is only needed on I_c: rows without a contact point skip their inverse row FFT.
         let nx = self.nx;
         let in_contact = |i: usize| p[i * nx..(i + 1) * nx].iter().any(|&v| v > 0.0);
-        // Always in f64: its products on the unpadded grid cost a quarter of a product of
-        // C, and in f32 they did not pay (see the module documentation).
-        self.pre
+        // In f32 with the operator's f32 twin (the single-precision switch, module docs): an
+        // approximate preconditioner changes the rate a little, not the answer. The twin is
+        // built with the preconditioner (driver), so `single()` only hands it out.
+        let pre = self
+            .pre
             .as_ref()
-            .expect("precondition() needs a preconditioner")
-            .apply_on_rows(z, r, &in_contact);
+            .expect("precondition() needs a preconditioner");
+        match (self.single.is_some(), pre.single()) {
+            (true, Ok(single)) => single.apply_on_rows(z, r, &in_contact),
+            _ => pre.apply_on_rows(z, r, &in_contact),
+        }
         self.pre_applies += 1;
         let (p, g, r) = (&self.p, &self.g, &self.r);
         self.parts

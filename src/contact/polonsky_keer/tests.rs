@@ -863,6 +863,17 @@ fn single_precision_early_products_reach_the_same_minimiser() {
             assert_eq!(b.single_products, 0);
             single_used += a.single_products;
             assert!(a.single_products < a.fft_products);
+            // Below the switch only the fresh products C p are f64 (at the switch, every
+            // hundredfold fall of the certificate, the confirmation, and in load control
+            // after steps that change many points): the increments stay f32 (4–5 of 20–134
+            // products here).
+            let double_products = a.fft_products - a.single_products;
+            if let Control::Approach(_) = control {
+                assert!(
+                    double_products <= 6,
+                    "{boundary:?} {control:?}: {double_products}"
+                );
+            }
             assert!(a.kkt <= tol && b.kkt <= tol, "{boundary:?} {control:?}");
             let ca: Vec<bool> = a.pressure.iter().map(|&p| p > 0.0).collect();
             let cb: Vec<bool> = b.pressure.iter().map(|&p| p > 0.0).collect();
