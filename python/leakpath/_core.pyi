@@ -297,9 +297,11 @@ class ContactProblem:
         iteration truncates or adds more than 0.5 % of the contact set, the next one is a
         chord step with one FFT product of the whole change and an exact line search).
         ``single_precision_above``: while the certificate is above this level the FFT
-        products are made in single precision (relative error ~1e-7); below it a fresh
-        double-precision product ``u = C p`` and double precision to the end, so the returned
-        fields and the certificate are double precision; ``0`` turns it off.
+        products are made in single precision (relative error ~1e-7); below it the full
+        products ``u = C p`` are double precision (at the switch, at every hundredfold fall
+        of the certificate and to confirm convergence) and the increments ``C t`` stay
+        single, so the returned fields and the certificate are double precision; with it,
+        the preconditioner's products are single precision too; ``0`` turns it off.
         ``ProblemTooLargeError`` (a ``MemoryError``) up front when the solve would need more
         than the problem's ``memory_limit``. The GIL is released; Ctrl-C raises
         ``KeyboardInterrupt`` within a fraction of a second.
