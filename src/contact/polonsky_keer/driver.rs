@@ -47,12 +47,12 @@ pub(super) enum Begin<'a> {
     Coarse(Vec<f64>),
 }
 
-/// The iteration from `begin`.
 /// Below the switch level, `u = C p` is refreshed in `f64` once the certificate has fallen
 /// this factor below its value at the previous refresh (the `f32` increments between two
 /// refreshes move `g` by about `1e-6` of their own size).
 pub(super) const REFRESH_RATIO: f64 = 1e-2;
 
+/// The iteration from `begin`.
 pub(super) fn run(
     op: &Operator,
     table: Option<&[f64]>,
@@ -228,29 +228,19 @@ pub(super) fn run(
             cg = false;
         }
         best_cert = best_cert.min(cert);
-        if cert <= opts.tol {
-            if (fresh && !(w.single.is_some() && w.single_full)) || finish == Finish::Incremental {
-                break;
-            }
-            // Converged on the incrementally updated u (or on f32 products): confirm on a
-            // fresh f64 product.
-            w.single_full = false;
-            w.refresh_u();
-            (state, delta) = w.evaluate(mode);
-            fresh = true;
-            refreshed_at = state.certificate() / scale_at(delta);
-            continue;
+        let converged = cert <= opts.tol;
+        if converged && ((fresh && !w.full_in_single()) || finish == Finish::Incremental) {
+            break;
         }
-        if w.single.is_some() && w.single_full && cert <= switch {
-            // Below the switch level: a fresh f64 product; f64 full products from here on.
+        // A fresh f64 product u = C p, and f64 full products from here on: to confirm
+        // convergence reached on an incrementally updated u (or on f32 products), at the
+        // switch level, and below it each time the certificate has fallen REFRESH_RATIO below
+        // its value at the last fresh product (the f32 increments' drift).
+        let at_switch = w.full_in_single() && cert <= switch;
+        let drifted =
+            w.single.is_some() && !w.single_full && !fresh && cert <= REFRESH_RATIO * refreshed_at;
+        if converged || at_switch || drifted {
             w.single_full = false;
-            w.refresh_u();
-            (state, delta) = w.evaluate(mode);
-            fresh = true;
-            refreshed_at = state.certificate() / scale_at(delta);
-            continue;
-        }
-        if w.single.is_some() && !w.single_full && !fresh && cert <= REFRESH_RATIO * refreshed_at {
             w.refresh_u();
             (state, delta) = w.evaluate(mode);
             fresh = true;

@@ -231,6 +231,11 @@ impl Work<'_> {
         self.applies += 1;
     }
 
+    /// Whether the full products `C p` are made in `f32` (above the switch level).
+    pub(super) fn full_in_single(&self) -> bool {
+        self.single.is_some() && self.single_full
+    }
+
     /// `r = C t` (in `f32` while [`Work::single`] is set).
     pub(super) fn product_t(&mut self) {
         match self.single {
