@@ -75,6 +75,40 @@ pub fn try_filled<T: Clone>(n: usize, value: T, what: &str) -> Result<Vec<T>> {
     Ok(v)
 }
 
+/// [`try_filled`] for a buffer read across its rows (a transform's columns): its pages are
+/// asked to be huge pages (Linux transparent huge pages, where enabled), so that a pass
+/// down a column of a 4097-wide grid does not miss the TLB at every row.
+pub fn try_filled_huge<T: Clone>(n: usize, value: T, what: &str) -> Result<Vec<T>> {
+    let mut v: Vec<T> = try_with_capacity(n, what)?;
+    advise_huge_pages(v.as_mut_ptr().cast(), n * std::mem::size_of::<T>());
+    v.resize(n, value);
+    Ok(v)
+}
+
+/// Asks the kernel to back the 2 MiB-aligned part of `bytes` bytes at `ptr` by huge pages,
+/// before they are first touched. Advice only: whatever the answer, nothing else changes.
+#[cfg(target_os = "linux")]
+fn advise_huge_pages(ptr: *mut u8, bytes: usize) {
+    const HUGE: usize = 2 << 20;
+    // `MADV_HUGEPAGE` (asm-generic/mman-common.h).
+    const MADV_HUGEPAGE: i32 = 14;
+    extern "C" {
+        fn madvise(addr: *mut std::ffi::c_void, len: usize, advice: i32) -> i32;
+    }
+    let start = (ptr as usize).next_multiple_of(HUGE);
+    let end = (ptr as usize + bytes) / HUGE * HUGE;
+    if end > start {
+        // SAFETY: the range lies inside this process's own allocation; `madvise` with
+        // `MADV_HUGEPAGE` only sets a flag on those pages and never changes their contents.
+        unsafe {
+            madvise(start as *mut std::ffi::c_void, end - start, MADV_HUGEPAGE);
+        }
+    }
+}
+
+#[cfg(not(target_os = "linux"))]
+fn advise_huge_pages(_ptr: *mut u8, _bytes: usize) {}
+
 /// An empty `Vec` with room for exactly `n` values, or `Error::TooLarge`.
 pub fn try_with_capacity<T>(n: usize, what: &str) -> Result<Vec<T>> {
     let bytes = bytes_of::<T>(n, what)?;

@@ -11,7 +11,7 @@ pub fn operator(ny: usize, nx: usize, boundary: Boundary) -> u64 {
     let (py, px) = padded(ny, nx, boundary);
     let (py, px, ny) = (py as u64, px as u64, ny as u64);
     let pxh = px / 2 + 1;
-    let spec = py.saturating_mul(pxh).saturating_mul(8);
+    let spec = (py / 2 + 1).saturating_mul(pxh).saturating_mul(8);
     // One apply: the ny × pxh half spectrum, allocated with the plans and kept.
     let apply = ny.saturating_mul(pxh).saturating_mul(16);
     // Building the free kernel spectrum: the padded kernel and its half spectrum, then
@@ -36,7 +36,7 @@ pub fn polonsky_keer(ny: usize, nx: usize, boundary: Boundary) -> u64 {
     let (py, px) = padded(ny, nx, boundary);
     let (py, px) = (py as u64, px as u64);
     let pxh = px / 2 + 1;
-    let spec = py.saturating_mul(pxh).saturating_mul(8);
+    let spec = (py / 2 + 1).saturating_mul(pxh).saturating_mul(8);
     let apply = (ny as u64).saturating_mul(pxh).saturating_mul(16);
     let build = match boundary {
         // Kernel table and the operator's apply buffer, then the padded real kernel and its
@@ -53,14 +53,14 @@ pub fn polonsky_keer(ny: usize, nx: usize, boundary: Boundary) -> u64 {
     // The preconditioner: its spectrum and apply buffer on the smooth-padded grid, and z.
     let (qy, qx) = (smooth_size(ny) as u64, smooth_size(nx) as u64);
     let qxh = qx / 2 + 1;
-    let pre = qy
+    let pre = (qy / 2 + 1)
         .saturating_mul(qxh)
         .saturating_mul(8)
         .saturating_add((ny as u64).saturating_mul(qxh).saturating_mul(16))
         .saturating_add(n.saturating_mul(8));
     // The f32 twins of the operator and of the preconditioner's transform: half the bytes of
     // their spectra and apply buffers.
-    let pre_transform = qy
+    let pre_transform = (qy / 2 + 1)
         .saturating_mul(qxh)
         .saturating_mul(8)
         .saturating_add((ny as u64).saturating_mul(qxh).saturating_mul(16));

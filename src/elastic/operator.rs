@@ -116,27 +116,23 @@ impl Operator {
     }
 
     /// `f(|q|)` on the half spectrum of the transform grid, `q = 2π·(k/L)` rad/length with
-    /// `L = P·dx`, column-major and divided by `Py·Px` (the inverse FFT is unnormalised).
+    /// `L = P·dx`, divided by `Py·Px` (the inverse FFT is unnormalised), in the layout of
+    /// [`Transform`]'s spectrum: column-major, rows `0..=Py/2` only (even in the row).
     fn radial_spectrum(
         &self,
         dx: f64,
         what: &str,
         f: impl Fn(f64) -> f64 + Sync,
     ) -> Result<Vec<f64>> {
-        let (py, px, pxh) = (self.py, self.px, self.px / 2 + 1);
+        let (py, px, pxh, sh) = (self.py, self.px, self.px / 2 + 1, self.py / 2 + 1);
         let norm = 1.0 / (py * px) as f64;
         let two_pi = 2.0 * std::f64::consts::PI;
         let (ly, lx) = (py as f64 * dx, px as f64 * dx);
-        let mut spec: Vec<f64> = alloc::try_zeroed(pxh * py, what)?;
-        spec.par_chunks_mut(py).enumerate().for_each(|(c, col)| {
+        let mut spec: Vec<f64> = alloc::try_zeroed(pxh * sh, what)?;
+        spec.par_chunks_mut(sh).enumerate().for_each(|(c, col)| {
             let qx = two_pi * c as f64 / lx;
             for (r, v) in col.iter_mut().enumerate() {
-                let kr = if r <= py / 2 {
-                    r as f64
-                } else {
-                    r as f64 - py as f64
-                };
-                let qy = two_pi * kr / ly;
+                let qy = two_pi * r as f64 / ly;
                 *v = f((qx * qx + qy * qy).sqrt()) * norm;
             }
         });
@@ -156,8 +152,9 @@ impl Operator {
         })
     }
 
-    /// Real part of the 2-D FFT of a real even `py × px` field, column-major over the half
-    /// spectrum and divided by `py·px`.
+    /// Real part of the 2-D FFT of a real even `py × px` field, divided by `py·px`, in the
+    /// layout of [`Transform`]'s spectrum (column-major over the half spectrum, rows
+    /// `0..=py/2`: the field is even, so its spectrum is even in the row too).
     fn full_spectrum(&self, mut field: Vec<f64>) -> Result<Vec<f64>> {
         let (py, px, pxh) = (self.py, self.px, self.px / 2 + 1);
         let mut half: Vec<Complex64> =
@@ -175,8 +172,9 @@ impl Operator {
             );
         drop(field);
         let norm = 1.0 / (py * px) as f64;
-        let mut spec: Vec<f64> = alloc::try_zeroed(pxh * py, "the kernel spectrum")?;
-        spec.par_chunks_mut(py).enumerate().for_each_init(
+        let sh = py / 2 + 1;
+        let mut spec: Vec<f64> = alloc::try_zeroed(pxh * sh, "the kernel spectrum")?;
+        spec.par_chunks_mut(sh).enumerate().for_each_init(
             || {
                 (
                     vec![Complex64::new(0.0, 0.0); py],
@@ -188,16 +186,16 @@ impl Operator {
                     buf[r] = half[r * pxh + c];
                 }
                 self.fft.col_fwd.process_with_scratch(buf, scratch);
-                for r in 0..py {
-                    col[r] = buf[r].re * norm;
+                for (v, b) in col.iter_mut().zip(buf.iter()) {
+                    *v = b.re * norm;
                 }
             },
         );
         Ok(spec)
     }
 
-    /// The real kernel spectrum, column-major over the half spectrum (`Py·(Px/2+1)` values),
-    /// divided by `Py·Px`.
+    /// The real kernel spectrum, divided by `Py·Px`: column-major over the half spectrum, rows
+    /// `0..=Py/2` of each column (`(Py/2+1)·(Px/2+1)` values; row `Py − r` equals row `r`).
     pub fn spectrum(&self) -> &[f64] {
         &self.fft.spec
     }
@@ -368,5 +366,38 @@ mod tests {
         let mut u0 = vec![1.0; ny * nx];
         op.apply(&vec![1.0; ny * nx], &mut u0);
         assert!(u0.iter().all(|v| v.abs() < 1e-14));
+    }
+
+    #[test]
+    fn periodic_operator_of_a_wave_along_each_axis_odd_and_even() {
+        // p = cos(q·x + phase) → u = 2 p / (E* |q|), for waves along axis 0 (rows k and
+        // P − k of the spectrum: its stored half and the mirrored one) on odd and even row
+        // counts, and along the diagonal.
+        let (dx, e) = (0.5, 1.3);
+        for &(ny, nx) in &[(9usize, 8usize), (10, 7), (15, 6)] {
+            let op = Operator::periodic(ny, nx, dx, e);
+            for &(ky, kx) in &[(1usize, 0usize), (2, 0), (ny / 2, 0), (2, 1)] {
+                let (qy, qx) = (
+                    2.0 * std::f64::consts::PI * ky as f64 / (ny as f64 * dx),
+                    2.0 * std::f64::consts::PI * kx as f64 / (nx as f64 * dx),
+                );
+                let q = (qy * qy + qx * qx).sqrt();
+                let p: Vec<f64> = (0..ny * nx)
+                    .map(|a| {
+                        let (i, j) = ((a / nx) as f64 * dx, (a % nx) as f64 * dx);
+                        (qy * i + qx * j + 0.3).cos()
+                    })
+                    .collect();
+                let mut u = vec![0.0; ny * nx];
+                op.apply(&p, &mut u);
+                for (a, b) in u.iter().zip(&p) {
+                    let want = 2.0 * b / (e * q);
+                    assert!(
+                        (a - want).abs() < 1e-12,
+                        "{ny}x{nx} k=({ky},{kx}): {a} vs {want}"
+                    );
+                }
+            }
+        }
     }
 }

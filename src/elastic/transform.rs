@@ -13,6 +13,16 @@
 //! rayon; each output value is computed by the same sequence of operations whatever the
 //! thread count.
 //!
+//! Memory access decides the column pass at 4097² (8192² padded grid; the half spectrum is
+//! 134 MB in `f32`, each row 32 KB): a block's gather and scatter go row by row, each row's
+//! block of values adjacent; the block's columns are padded apart in the work buffer so that
+//! the same row of each does not fall into one L1 set; the half spectrum is asked for huge
+//! pages (`alloc::try_filled_huge`), so a pass down the rows does not miss the TLB at every
+//! row; and only half of the even kernel spectrum is stored. One `f64` product at 4097²,
+//! median of 5 on 2 cores: 0.462–0.491 s column by column, 0.376–0.392 s row by row,
+//! 0.338 s with huge pages, 0.334–0.337 s with the pad; the `f32` products of a Polonsky–Keer
+//! solve gained more (`benchmarks/results/contact_scale.md`).
+//!
 //! [`Operator`]: super::operator::Operator
 //! [`Operator::single`]: super::operator::Operator::single
 
@@ -27,7 +37,10 @@ use crate::alloc;
 use crate::error::Result;
 
 /// Columns handled per rayon task in the fused column pass.
-const COLUMN_BLOCK: usize = 8;
+const COLUMN_BLOCK: usize = 16;
+
+/// Values of padding between two columns of a block in the column pass's buffer.
+const COLUMN_PAD: usize = 8;
 
 /// The float type of a transform: an FFT number that converts from and to `f64`.
 pub trait Real: FftNum + Into<f64> {
@@ -61,8 +74,10 @@ pub struct Transform<T: Real> {
     px: usize,
     /// Half-spectrum width `px/2 + 1`.
     pxh: usize,
-    /// Real kernel spectrum, column-major over the half spectrum: `spec[c * py + r]`, already
-    /// divided by `py·px` (the inverse transforms are unnormalised).
+    /// Real kernel spectrum, column-major over the half spectrum, already divided by `py·px`
+    /// (the inverse transforms are unnormalised). The kernel is even, so its spectrum is even
+    /// in the row as well: only rows `0..=py/2` are stored, `spec[c * (py/2 + 1) + r]`, and
+    /// row `py − r` reads row `r` (half the bytes each product streams through memory).
     pub(super) spec: Vec<T>,
     pub(super) r2c: Arc<dyn RealToComplex<T>>,
     c2r: Arc<dyn ComplexToReal<T>>,
@@ -74,12 +89,12 @@ pub struct Transform<T: Real> {
 
 impl<T: Real> Transform<T> {
     /// Plans and the apply buffer (allocated here, so that `apply` never has to) for the
-    /// kernel spectrum `spec` (`py·(px/2+1)` values, or empty until the caller sets it);
+    /// kernel spectrum `spec` (`(py/2+1)·(px/2+1)` values, or empty until the caller sets it);
     /// `Error::TooLarge` when the buffer cannot be allocated.
     pub(super) fn plan(ny: usize, nx: usize, py: usize, px: usize, spec: Vec<T>) -> Result<Self> {
         let pxh = px / 2 + 1;
         let cells = alloc::checked_cells(ny, pxh, "the half spectrum")?;
-        let half = alloc::try_filled(
+        let half = alloc::try_filled_huge(
             cells,
             Complex::new(T::zero(), T::zero()),
             &format!("the {ny} × {pxh} half spectrum"),
@@ -150,41 +165,53 @@ impl<T: Real> Transform<T> {
         // transpose.
         let n_blocks = pxh.div_ceil(COLUMN_BLOCK);
         let half_ptr = SyncPtr(half.as_mut_ptr());
+        // The block's columns lie `ld` apart in `buf`: `py` values of 8 or 16 bytes are a
+        // multiple of 4 KiB at the padded sizes (2048–16384), which would put the same row of
+        // all the block's columns in one L1 set (8 ways for 16 columns); the pad staggers them.
+        let ld = py + COLUMN_PAD;
         (0..n_blocks).into_par_iter().for_each_init(
             || {
                 let s = self
                     .col_fwd
                     .get_inplace_scratch_len()
                     .max(self.col_inv.get_inplace_scratch_len());
-                (vec![zero; py * COLUMN_BLOCK], vec![zero; s])
+                (vec![zero; ld * COLUMN_BLOCK], vec![zero; s])
             },
             |(buf, scratch), b| {
                 let c0 = b * COLUMN_BLOCK;
                 let c1 = (c0 + COLUMN_BLOCK).min(pxh);
                 let w = c1 - c0;
                 let hp = half_ptr;
-                for (t, c) in (c0..c1).enumerate() {
-                    let col = &mut buf[t * py..(t + 1) * py];
-                    for (r, v) in col[..ny].iter_mut().enumerate() {
-                        // SAFETY: column c belongs to this task only; r < ny rows exist.
-                        *v = unsafe { *hp.0.add(r * pxh + c) };
+                // Row by row: each row's `w` values are adjacent, so a block touches each
+                // row's page once (column by column, every value is on another page).
+                for r in 0..ny {
+                    // SAFETY: columns c0..c1 belong to this task only; r < ny rows exist.
+                    let src = unsafe { std::slice::from_raw_parts(hp.0.add(r * pxh + c0), w) };
+                    for (t, &v) in src.iter().enumerate() {
+                        buf[t * ld + r] = v;
                     }
-                    col[ny..].fill(zero);
                 }
-                self.col_fwd
-                    .process_with_scratch(&mut buf[..w * py], scratch);
+                let sh = py / 2 + 1;
                 for (t, c) in (c0..c1).enumerate() {
-                    let k = &self.spec[c * py..(c + 1) * py];
-                    for (v, &s) in buf[t * py..(t + 1) * py].iter_mut().zip(k) {
+                    let col = &mut buf[t * ld..t * ld + py];
+                    col[ny..].fill(zero);
+                    self.col_fwd.process_with_scratch(col, scratch);
+                    let k = &self.spec[c * sh..(c + 1) * sh];
+                    let (lo, hi) = col.split_at_mut(sh);
+                    for (v, &s) in lo.iter_mut().zip(k) {
                         *v = *v * s;
                     }
+                    // Rows sh..py are rows py − sh..1 of the stored half.
+                    for (v, &s) in hi.iter_mut().zip(k[1..=py - sh].iter().rev()) {
+                        *v = *v * s;
+                    }
+                    self.col_inv.process_with_scratch(col, scratch);
                 }
-                self.col_inv
-                    .process_with_scratch(&mut buf[..w * py], scratch);
-                for (t, c) in (c0..c1).enumerate() {
-                    for r in 0..ny {
-                        // SAFETY: as above.
-                        unsafe { *hp.0.add(r * pxh + c) = buf[t * py + r] };
+                for r in 0..ny {
+                    // SAFETY: as above.
+                    let dst = unsafe { std::slice::from_raw_parts_mut(hp.0.add(r * pxh + c0), w) };
+                    for (t, v) in dst.iter_mut().enumerate() {
+                        *v = buf[t * ld + r];
                     }
                 }
             },
