@@ -28,8 +28,9 @@ pub fn operator(ny: usize, nx: usize, boundary: Boundary) -> u64 {
 
 /// Peak bytes of a Polonsky–Keer solve ([`crate::contact::polonsky_keer::solve`]) on an `ny × nx` grid: the larger of building the operator (free:
 /// kernel table, padded kernel and its half spectrum) and iterating (kernel spectrum, the
-/// operator's half-spectrum buffer, the preconditioner's, and their `f32` twins, six `N`-vectors `p, u, g, t, r` and the influence table
-/// of the sparse corrections), plus one copy of the heights (the bindings copy non-contiguous
+/// operator's half-spectrum buffer, the preconditioner's, and their `f32` twins, seven `N`-vectors
+/// `p, u, g, t, r`, the field of non-linear changes and the influence table of the sparse
+/// corrections), plus one copy of the heights (the bindings copy non-contiguous
 /// input) and a margin for the coarse-to-fine start.
 pub fn polonsky_keer(ny: usize, nx: usize, boundary: Boundary) -> u64 {
     let n = (ny as u64).saturating_mul(nx as u64);
@@ -68,7 +69,7 @@ pub fn polonsky_keer(ny: usize, nx: usize, boundary: Boundary) -> u64 {
     let iterate = spec
         .saturating_add(apply)
         .saturating_add(single)
-        .saturating_add(n.saturating_mul(6 * 8))
+        .saturating_add(n.saturating_mul(7 * 8))
         .saturating_add(pre);
     // The coarse-start pressure becomes the iterate `p`. The coarse levels run on a quarter of
     // the points before the fine operator is built; with a caller's operator they run beside

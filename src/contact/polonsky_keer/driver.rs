@@ -164,6 +164,7 @@ pub(super) fn run(
             "the sparse-correction slots",
         )?,
         changes: Vec::with_capacity(SPARSE_MAX),
+        changes_field: Vec::new(),
         ny,
         nx,
         periodic,
@@ -241,6 +242,9 @@ pub(super) fn run(
             w.single.is_some() && !w.single_full && !fresh && cert <= REFRESH_RATIO * refreshed_at;
         if converged || at_switch || drifted {
             w.single_full = false;
+            if w.single.is_some() && w.changes_field.is_empty() {
+                w.changes_field = alloc::try_zeroed(n, "the non-linear changes field")?;
+            }
             w.refresh_u();
             (state, delta) = w.evaluate(mode);
             fresh = true;
@@ -420,8 +424,14 @@ pub(super) fn run(
                 Mode::Load(_) => w.correct_u(),
             });
         }
-        let now = sparse.unwrap_or(up);
-        let consistent = up.n_nl <= sparse_max;
+        let mut now = sparse.unwrap_or(up);
+        let mut consistent = up.n_nl <= sparse_max;
+        if !consistent && !w.changes_field.is_empty() {
+            // Below the switch level: the changes by one f32 increment product, not a fresh
+            // f64 product C p.
+            now = w.correct_dense(mode);
+            consistent = true;
+        }
         chord = chords_on && wholesale(up.n_nl, up.n_c, sparse_max);
         match mode {
             Mode::Displacement(_) if consistent => {

@@ -179,8 +179,10 @@
 //! certificate falls to the switch level (or to `tol`, if that is higher), `u = C p` is
 //! recomputed in `f64`.
 //!
-//! Below the switch level only the full products `u = C p` are `f64`; the increments `C t`
-//! (`C d` of a chord step) stay `f32`. An increment's error is about `1e-6` of the increment
+//! Below the switch level only the full products `u = C p` are `f64`; the increments `C t`,
+//! `C d` of a chord step, and `C d` of the non-linear changes of a step that changes more
+//! points than direct summation takes (`Work::correct_dense`; above the switch such a step
+//! gets a fresh product `C p`) stay `f32`. An increment's error is about `1e-6` of the increment
 //! itself, not of `u`: after a fresh `f64` product at certificate `c₀` the remaining steps
 //! move the gap by some `c₀ h_s` in all, so the `f32` increments leave it within about
 //! `1e-6 · c₀ h_s` of the gap a fresh product would give, and each fresh product starts
@@ -198,6 +200,11 @@
 //! `Work::precondition` in `passes.rs`) are made by its own `f32` twin too, above and below the
 //! switch: an approximate preconditioner changes the rate a little, not the answer, and
 //! the certificate is still that of `f64` products.
+//!
+//! The many-point corrections were fresh `f64` products `C p` until they too became `f32`
+//! increments. At 4097², free, `Δ = 0.3 h_s` (RMD D = 2.2, seed 0, tol 1e-8), they were 20
+//! of the solve's 23 `f64` products (of 119); the same 88 iterations and contact set then
+//! took 33.3 s against 37.1 s with 3 `f64` products left (`benchmarks/results/contact_scale.md`).
 //!
 //! What the `f32` increments below the switch and the `f32` preconditioner bought, 20-level
 //! RMD sweeps (D = 2.2, seed 0, free, the sweep's certificate `1e-9`, no flow; one process

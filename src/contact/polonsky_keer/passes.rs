@@ -4,6 +4,7 @@
 
 use std::borrow::Cow;
 
+use rayon::iter::Either;
 use rayon::prelude::*;
 
 use super::{CHUNK, SPARSE_MAX};
@@ -172,6 +173,11 @@ pub(super) struct Work<'a> {
     pub(super) slots: Vec<(usize, f64)>,
     /// Scratch list of all changes in index order.
     pub(super) changes: Vec<(usize, f64)>,
+    /// Below the switch level (only then: empty otherwise), the last update's non-linear
+    /// changes `d` as a field, zero elsewhere and zero again once applied: too many for
+    /// direct summation, they are applied by one `f32` increment product `C d` instead of
+    /// a fresh `f64` product `C p` ([`Work::correct_dense`]).
+    pub(super) changes_field: Vec<f64>,
     pub(super) ny: usize,
     pub(super) nx: usize,
     pub(super) periodic: bool,
@@ -246,6 +252,71 @@ impl Work<'_> {
             None => self.op.apply(&self.t, &mut self.r),
         }
         self.applies += 1;
+    }
+
+    /// Applies the last update's non-linear changes `d` (the changes field) by one increment
+    /// product `C d`, in `f32` when the twin is in use, and zeroes the field in the same pass.
+    /// Displacement control: `g ← g + C d` and the reductions of the corrected gap; load
+    /// control: `u ← u + C d` and `Σ p`, `Σ_{I_c} (max h − h)`, `Σ_{I_c} u` of the corrected
+    /// state (as [`Work::correct_gap`] and [`Work::correct_u`] for a few changes).
+    ///
+    /// An `f32` product errs by about `1e-6` of `|C d|`, the size of the step's correction,
+    /// not of `u`: the same drift as the increments `C t`, bounded by the same `f64`
+    /// refreshes (module documentation).
+    pub(super) fn correct_dense(&mut self, mode: Mode) -> Acc {
+        match self.single {
+            Some(s) => {
+                s.apply(&self.changes_field, &mut self.r);
+                self.single_applies += 1;
+            }
+            None => self.op.apply(&self.changes_field, &mut self.r),
+        }
+        self.applies += 1;
+        let (h, hmax) = (self.h, self.hmax);
+        let Work {
+            p,
+            u,
+            g,
+            r,
+            parts,
+            changes_field,
+            ..
+        } = self;
+        let (p, r) = (&*p, &*r);
+        // Displacement control corrects the gap, load control the displacement.
+        let field = match mode {
+            Mode::Displacement(_) => g,
+            Mode::Load(_) => u,
+        };
+        parts
+            .par_iter_mut()
+            .zip(field.par_chunks_mut(CHUNK))
+            .zip(changes_field.par_chunks_mut(CHUNK))
+            .enumerate()
+            .for_each(|(c, ((acc, vc), fc))| {
+                let lo = c * CHUNK;
+                let len = vc.len();
+                let (pc, rc, hc) = (&p[lo..lo + len], &r[lo..lo + len], &h[lo..lo + len]);
+                fc.fill(0.0);
+                let mut a = Acc::ZERO;
+                for i in 0..len {
+                    let v = vc[i] + rc[i];
+                    vc[i] = v;
+                    match mode {
+                        Mode::Displacement(_) => a.observe(pc[i], v),
+                        Mode::Load(_) => {
+                            if pc[i] > 0.0 {
+                                a.n_c += 1;
+                                a.sum_p += pc[i];
+                                a.sh += hmax - hc[i];
+                                a.su += v;
+                            }
+                        }
+                    }
+                }
+                *acc = a;
+            });
+        combine(parts)
     }
 
     /// The displacement field of the last fresh product.
@@ -620,6 +691,7 @@ impl Work<'_> {
     ///   new state (the gap is written by the following [`Work::gap_pass`]).
     pub(super) fn update(&mut self, tau: f64, tau_ol: f64, mode: Mode) -> Acc {
         let (h, hmax) = (self.h, self.hmax);
+        let n_chunks = self.parts.len();
         let Work {
             p,
             u,
@@ -628,17 +700,25 @@ impl Work<'_> {
             r,
             slots,
             parts,
+            changes_field,
             ..
         } = self;
         let (t, r) = (&*t, &*r);
+        // Each chunk's part of the changes field, when there is one.
+        let fields = if changes_field.is_empty() {
+            Either::Left((0..n_chunks).into_par_iter().map(|_| None))
+        } else {
+            Either::Right(changes_field.par_chunks_mut(CHUNK).map(Some))
+        };
         match mode {
             Mode::Displacement(_) => parts
                 .par_iter_mut()
                 .zip(slots.par_chunks_mut(SPARSE_MAX))
                 .zip(p.par_chunks_mut(CHUNK))
                 .zip(g.par_chunks_mut(CHUNK))
+                .zip(fields)
                 .enumerate()
-                .for_each(|(c, (((acc, sl), pc), gc))| {
+                .for_each(|(c, ((((acc, sl), pc), gc), mut fc))| {
                     let lo = c * CHUNK;
                     let len = pc.len();
                     let (tc, rc) = (&t[lo..lo + len], &r[lo..lo + len]);
@@ -648,6 +728,9 @@ impl Work<'_> {
                         let pn = Self::step_point(lin, gc[i], tau_ol, &mut a);
                         if pn != lin {
                             record(sl, &mut a, lo + i, pn - lin);
+                            if let Some(f) = fc.as_deref_mut() {
+                                f[i] = pn - lin;
+                            }
                         }
                         pc[i] = pn;
                         let gi = gc[i] - tau * rc[i];
@@ -661,8 +744,9 @@ impl Work<'_> {
                 .zip(slots.par_chunks_mut(SPARSE_MAX))
                 .zip(p.par_chunks_mut(CHUNK))
                 .zip(u.par_chunks_mut(CHUNK))
+                .zip(fields)
                 .enumerate()
-                .for_each(|(c, (((acc, sl), pc), uc))| {
+                .for_each(|(c, ((((acc, sl), pc), uc), mut fc))| {
                     let lo = c * CHUNK;
                     let len = pc.len();
                     let (hc, gc) = (&h[lo..lo + len], &g[lo..lo + len]);
@@ -673,6 +757,9 @@ impl Work<'_> {
                         let pn = Self::step_point(lin, gc[i], tau_ol, &mut a);
                         if pn != lin {
                             record(sl, &mut a, lo + i, pn - lin);
+                            if let Some(f) = fc.as_deref_mut() {
+                                f[i] = pn - lin;
+                            }
                         }
                         pc[i] = pn;
                         let ui = uc[i] - tau * rc[i];

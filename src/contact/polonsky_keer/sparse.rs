@@ -19,6 +19,12 @@ impl Work<'_> {
             self.changes
                 .extend_from_slice(&self.slots[c * SPARSE_MAX..c * SPARSE_MAX + k]);
         }
+        // These changes are applied here: the changes field goes back to zero.
+        if !self.changes_field.is_empty() {
+            for &(i, _) in &self.changes {
+                self.changes_field[i] = 0.0;
+            }
+        }
     }
 
     /// Build the influence table `C e_0` on first use (one operator application, into `r`,
