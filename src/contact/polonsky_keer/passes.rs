@@ -127,6 +127,18 @@ impl Acc {
         }
     }
 
+    /// Account one point for load control's step 7: `Σ p`, and over `I_c` the count,
+    /// `Σ (max h − h)` (`rise` = `max h − h`) and `Σ u`.
+    #[inline(always)]
+    pub(super) fn observe_load(&mut self, p: f64, rise: f64, u: f64) {
+        if p > 0.0 {
+            self.n_c += 1;
+            self.sum_p += p;
+            self.sh += rise;
+            self.su += u;
+        }
+    }
+
     /// Unscaled `max(−min g, max_{I_c} |g|, Σ p|g| / Σ p)`.
     pub(super) fn certificate(&self) -> f64 {
         if self.bad > 0 {
@@ -304,14 +316,7 @@ impl Work<'_> {
                     vc[i] = v;
                     match mode {
                         Mode::Displacement(_) => a.observe(pc[i], v),
-                        Mode::Load(_) => {
-                            if pc[i] > 0.0 {
-                                a.n_c += 1;
-                                a.sum_p += pc[i];
-                                a.sh += hmax - hc[i];
-                                a.su += v;
-                            }
-                        }
+                        Mode::Load(_) => a.observe_load(pc[i], hmax - hc[i], v),
                     }
                 }
                 *acc = a;
@@ -388,12 +393,7 @@ impl Work<'_> {
             let hi = (lo + CHUNK).min(h.len());
             let mut a = Acc::ZERO;
             for i in lo..hi {
-                if p[i] > 0.0 {
-                    a.n_c += 1;
-                    a.sum_p += p[i];
-                    a.sh += hmax - h[i];
-                    a.su += u[i];
-                }
+                a.observe_load(p[i], hmax - h[i], u[i]);
             }
             *acc = a;
         });
@@ -634,12 +634,7 @@ impl Work<'_> {
                     }
                     let ui = uc[i] + s * rc[i];
                     uc[i] = ui;
-                    if pc[i] > 0.0 {
-                        a.n_c += 1;
-                        a.sum_p += pc[i];
-                        a.sh += hmax - hc[i];
-                        a.su += ui;
-                    }
+                    a.observe_load(pc[i], hmax - hc[i], ui);
                 }
                 *acc = a;
             });
@@ -764,12 +759,7 @@ impl Work<'_> {
                         pc[i] = pn;
                         let ui = uc[i] - tau * rc[i];
                         uc[i] = ui;
-                        if pn > 0.0 {
-                            a.n_c += 1;
-                            a.sum_p += pn;
-                            a.sh += hmax - hc[i];
-                            a.su += ui;
-                        }
+                        a.observe_load(pn, hmax - hc[i], ui);
                     }
                     *acc = a;
                 }),

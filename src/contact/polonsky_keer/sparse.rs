@@ -93,12 +93,7 @@ impl Work<'_> {
                 add_sparse(uc, lo, changes, table, ny, nx, periodic);
                 let mut a = Acc::ZERO;
                 for (i, &ui) in uc.iter().enumerate() {
-                    if p[lo + i] > 0.0 {
-                        a.n_c += 1;
-                        a.sum_p += p[lo + i];
-                        a.sh += hmax - h[lo + i];
-                        a.su += ui;
-                    }
+                    a.observe_load(p[lo + i], hmax - h[lo + i], ui);
                 }
                 *acc = a;
             });
