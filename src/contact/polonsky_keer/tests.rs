@@ -873,33 +873,16 @@ fn single_precision_early_products_reach_the_same_minimiser() {
                 double_products <= 6,
                 "{boundary:?} {control:?}: {double_products}"
             );
-            assert!(a.kkt <= tol && b.kkt <= tol, "{boundary:?} {control:?}");
-            let ca: Vec<bool> = a.pressure.iter().map(|&p| p > 0.0).collect();
-            let cb: Vec<bool> = b.pressure.iter().map(|&p| p > 0.0).collect();
-            assert_eq!(ca, cb, "{boundary:?} {control:?}");
-            // The gap of the returned pressure, in f64.
-            let mut u = vec![0.0; ny * nx];
-            op.apply(&a.pressure, &mut u);
-            let g: Vec<f64> = (0..ny * nx)
-                .map(|i| hmax - a.approach - h[i] + u[i])
-                .collect();
-            let scale = hs.max(a.approach);
-            for (x, y) in g.iter().zip(&a.gap) {
-                assert!((x - y).abs() <= 1e-12 * scale, "{boundary:?} {control:?}");
-            }
-            assert!(kkt_certificate(&a.pressure, &g, scale) <= 2.0 * tol);
-            let bound = (a.kkt + b.kkt) * scale;
-            let dg = a
-                .gap
-                .iter()
-                .zip(&b.gap)
-                .zip(&a.pressure)
-                .filter(|&(_, &p)| p > 0.0)
-                .fold(0.0f64, |m, ((x, y), _)| m.max((x - y).abs()));
-            assert!(dg <= bound, "{boundary:?} {control:?}: {dg} vs {bound}");
-            let dl = (a.load - b.load).abs() / b.load;
-            assert!(dl <= 1e-6, "{boundary:?} {control:?}: load rel diff {dl}");
-            assert!((a.approach - b.approach).abs() <= 1e3 * bound);
+            assert_same_minimiser(
+                &op,
+                &h,
+                hmax,
+                hs,
+                &a,
+                &b,
+                tol,
+                &format!("{boundary:?} {control:?}"),
+            );
         }
         assert!(single_used > 0, "{boundary:?}: no f32 product was made");
     }
@@ -939,10 +922,10 @@ fn many_point_corrections_below_the_switch_are_single_precision_increments() {
     // fresh f64 product C p: 6 f64 products in all, now the switch, two hundredfold refreshes
     // and the confirmation). Oracle: the same solve in f64 throughout — the same contact
     // set, certificates below tol, the returned gap equal to the f64 gap of the returned
-    // pressure, loads and gaps within the certificates' bound.
+    // pressure, gaps and approach within the certificates' bound, loads within 1e-9.
     let (n, tol) = (513usize, 1e-10);
     let h = rough(n, n, 31);
-    let (hmax, _, _) = height_stats(&h);
+    let (hmax, hmin, _) = height_stats(&h);
     let pr = problem(&h, n, n, Boundary::Free);
     let op = Operator::free(&crate::elastic::kernel::Kernel::new(n, n, pr.dx, pr.e_star));
     let double = Options {
@@ -955,19 +938,63 @@ fn many_point_corrections_below_the_switch_are_single_precision_increments() {
         let b = solve(&pr, control, &double, None).unwrap();
         let double_products = a.fft_products - a.single_products;
         assert!(double_products <= 4, "p̄ = {pbar}: {double_products}");
-        assert!(a.kkt <= tol && b.kkt <= tol, "p̄ = {pbar}");
-        let ca: Vec<bool> = a.pressure.iter().map(|&p| p > 0.0).collect();
-        let cb: Vec<bool> = b.pressure.iter().map(|&p| p > 0.0).collect();
-        assert_eq!(ca, cb, "p̄ = {pbar}");
-        let mut u = vec![0.0; n * n];
-        op.apply(&a.pressure, &mut u);
-        let scale = (hmax - height_stats(&h).1).max(a.approach.abs());
-        for (i, &ga) in a.gap.iter().enumerate() {
-            let g = hmax - a.approach - h[i] + u[i];
-            assert!((g - ga).abs() <= 1e-12 * scale, "p̄ = {pbar}: {g} vs {ga}");
-        }
-        let bound = (a.kkt + b.kkt) * scale;
-        assert!((a.approach - b.approach).abs() <= 1e3 * bound, "p̄ = {pbar}");
+        assert_same_minimiser(
+            &op,
+            &h,
+            hmax,
+            hmax - hmin,
+            &a,
+            &b,
+            tol,
+            &format!("p̄ = {pbar}"),
+        );
         assert!((a.load - b.load).abs() <= 1e-9 * b.load, "p̄ = {pbar}");
     }
+}
+
+/// `a` (with `f32` products) and `b` (in `f64` throughout) solve the same problem: both
+/// certificates below `tol`, the same contact set, `a`'s gap the `f64` gap of its pressure
+/// (recomputed with `op`) whose certificate is below `2 tol`, gaps on the contact set, the
+/// load and the approach within the certificates' bound.
+#[allow(clippy::too_many_arguments)]
+fn assert_same_minimiser(
+    op: &Operator,
+    h: &[f64],
+    hmax: f64,
+    hs: f64,
+    a: &Solution,
+    b: &Solution,
+    tol: f64,
+    what: &str,
+) {
+    assert!(a.kkt <= tol && b.kkt <= tol, "{what}");
+    let ca: Vec<bool> = a.pressure.iter().map(|&p| p > 0.0).collect();
+    let cb: Vec<bool> = b.pressure.iter().map(|&p| p > 0.0).collect();
+    assert_eq!(ca, cb, "{what}");
+    // The gap of the returned pressure, in f64.
+    let mut u = vec![0.0; h.len()];
+    op.apply(&a.pressure, &mut u);
+    let g: Vec<f64> = (0..h.len())
+        .map(|i| hmax - a.approach - h[i] + u[i])
+        .collect();
+    let scale = hs.max(a.approach);
+    for (x, y) in g.iter().zip(&a.gap) {
+        assert!((x - y).abs() <= 1e-12 * scale, "{what}");
+    }
+    assert!(
+        kkt_certificate(&a.pressure, &g, scale) <= 2.0 * tol,
+        "{what}"
+    );
+    let bound = (a.kkt + b.kkt) * scale;
+    let dg = a
+        .gap
+        .iter()
+        .zip(&b.gap)
+        .zip(&a.pressure)
+        .filter(|&(_, &p)| p > 0.0)
+        .fold(0.0f64, |m, ((x, y), _)| m.max((x - y).abs()));
+    assert!(dg <= bound, "{what}: {dg} vs {bound}");
+    let dl = (a.load - b.load).abs() / b.load;
+    assert!(dl <= 1e-6, "{what}: load rel diff {dl}");
+    assert!((a.approach - b.approach).abs() <= 1e3 * bound, "{what}");
 }
