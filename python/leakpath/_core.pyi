@@ -299,8 +299,9 @@ class ContactProblem:
         ``single_precision_above``: while the certificate is above this level the FFT
         products are made in single precision (relative error ~1e-7); below it the full
         products ``u = C p`` are double precision (at the switch, at every hundredfold fall
-        of the certificate and to confirm convergence) and the increments ``C t`` stay
-        single, so the returned fields and the certificate are double precision; with it,
+        of the certificate and to confirm convergence) and the increments (``C t``, and
+        ``C d`` of chord steps and of steps that change many points) stay single, so the
+        returned fields and the certificate are double precision; with it,
         the preconditioner's products are single precision too; ``0`` turns it off.
         ``ProblemTooLargeError`` (a ``MemoryError``) up front when the solve would need more
         than the problem's ``memory_limit``. The GIL is released; Ctrl-C raises

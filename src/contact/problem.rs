@@ -180,7 +180,8 @@ pub struct Options<'a> {
     /// single precision ([`crate::elastic::transform::Operator32`]); below it, the full
     /// products `u = C p` are made in double precision (one at the switch, then one each
     /// time the certificate has fallen a hundredfold, and one to confirm convergence) and
-    /// the increments `C t` stay single. `0` (or any level `≤ tol`): double precision
+    /// the increments (`C t`, and `C d` of chord steps and of steps that change many points)
+    /// stay single. `0` (or any level `≤ tol`): double precision
     /// throughout. The answer is the same to the certificate.
     pub single_precision_above: f64,
 }

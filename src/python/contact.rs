@@ -268,7 +268,7 @@ impl ContactProblem {
     /// `contact_set` (flat indices). `precondition`, `coarse_start`, `chord_steps` tune
     /// Polonsky–Keer (see `contact::Options`), as does `single_precision_above` (the
     /// certificate above which all its FFT products are made in f32, below which only the
-    /// increments `C t`; 0: f64 throughout); the
+    /// increments `C t`, `C d`; 0: f64 throughout); the
     /// answer is the same minimiser. `hardness`:
     /// cap the pressure at `p ≤ H` (`contact::capped`; `None` or `inf`: elastic).
     #[pyo3(signature = (
