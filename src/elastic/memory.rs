@@ -51,14 +51,14 @@ pub fn polonsky_keer(ny: usize, nx: usize, boundary: Boundary) -> u64 {
         }
         Boundary::Periodic => spec.saturating_add(apply),
     };
-    // The preconditioner: its spectrum and apply buffer on the smooth-padded grid, and z.
+    // The preconditioner: its spectrum and apply buffer on the smooth-padded grid (its
+    // result, z, is written into r).
     let (qy, qx) = (smooth_size(ny) as u64, smooth_size(nx) as u64);
     let qxh = qx / 2 + 1;
     let pre = (qy / 2 + 1)
         .saturating_mul(qxh)
         .saturating_mul(8)
-        .saturating_add((ny as u64).saturating_mul(qxh).saturating_mul(16))
-        .saturating_add(n.saturating_mul(8));
+        .saturating_add((ny as u64).saturating_mul(qxh).saturating_mul(16));
     // The f32 twins of the operator and of the preconditioner's transform: half the bytes of
     // their spectra and apply buffers.
     let pre_transform = (qy / 2 + 1)

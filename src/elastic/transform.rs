@@ -118,21 +118,65 @@ impl<T: Real> Transform<T> {
 
     /// `u = C p` for row-major `ny × nx` fields.
     pub fn apply(&self, p: &[f64], u: &mut [f64]) {
-        self.apply_rows(p, u, None);
+        assert_eq!(p.len(), self.ny * self.nx);
+        let nx = self.nx;
+        self.product(
+            u,
+            |i, row| load_row(&p[i * nx..(i + 1) * nx], row),
+            |_| true,
+            store_row,
+        );
     }
 
-    /// `u = C p` on the rows `i` with `keep(i)`; `u = 0` on the other rows, whose inverse row
-    /// FFTs are skipped (the preconditioner, whose result is only used on the contact set).
-    pub fn apply_on_rows(&self, p: &[f64], u: &mut [f64], keep: &(dyn Fn(usize) -> bool + Sync)) {
-        self.apply_rows(p, u, Some(keep));
+    /// The product restricted to a point set, `u = χ C χ x` with `χ` the indicator of
+    /// `S = {k : member(support_k)}`: `x` is taken as zero off `S` and `u` is set to zero there.
+    /// Rows without a point of `S` skip both their row FFTs. This is `C_SS` of a Polonsky–Keer
+    /// preconditioner on the contact set, without a masked copy of `x` or of `u`.
+    pub fn apply_restricted<M>(&self, x: &[f64], support: &[f64], member: M, u: &mut [f64])
+    where
+        M: Fn(f64) -> bool + Sync,
+    {
+        let (ny, nx) = (self.ny, self.nx);
+        assert_eq!(x.len(), ny * nx);
+        assert_eq!(support.len(), ny * nx);
+        let rows: Vec<bool> = support
+            .par_chunks(nx)
+            .map(|s| s.iter().any(|&v| member(v)))
+            .collect();
+        self.product(
+            u,
+            |i, row| {
+                if !rows[i] {
+                    return false;
+                }
+                let (xs, ss) = (&x[i * nx..(i + 1) * nx], &support[i * nx..(i + 1) * nx]);
+                for ((d, &v), &s) in row.iter_mut().zip(xs).zip(ss) {
+                    *d = if member(s) { T::of(v) } else { T::zero() };
+                }
+                true
+            },
+            |i| rows[i],
+            |i, row, out| {
+                let ss = &support[i * nx..(i + 1) * nx];
+                for ((d, &v), &s) in out.iter_mut().zip(row).zip(ss) {
+                    *d = if member(s) { v.into() } else { 0.0 };
+                }
+            },
+        );
     }
 
-    /// `u = C p`, on every row or only on the rows `keep` selects. A row of `p` that is zero
-    /// has a zero row transform, so its forward row FFT is skipped (the iterates of a contact
-    /// solve vanish outside the contact set, often on whole rows).
-    fn apply_rows(&self, p: &[f64], u: &mut [f64], keep: Option<&(dyn Fn(usize) -> bool + Sync)>) {
+    /// The product on rows: `load(i, row)` writes row `i` of the input into `row[..nx]` and
+    /// returns `false` for a zero row (its transform is zero, its forward FFT skipped);
+    /// `keep(i)` selects the rows computed (the others are set to zero, their inverse FFT
+    /// skipped); `store(i, row, out)` writes row `i` of `u` from the first `nx` transformed
+    /// values.
+    fn product<L, K, S>(&self, u: &mut [f64], load: L, keep: K, store: S)
+    where
+        L: Fn(usize, &mut [T]) -> bool + Sync,
+        K: Fn(usize) -> bool + Sync,
+        S: Fn(usize, &[T], &mut [f64]) + Sync,
+    {
         let (ny, nx, py, px, pxh) = (self.ny, self.nx, self.py, self.px, self.pxh);
-        assert_eq!(p.len(), ny * nx);
         assert_eq!(u.len(), ny * nx);
         let zero = Complex::new(T::zero(), T::zero());
         // Rows: real-to-complex on the zero-padded row.
@@ -146,13 +190,9 @@ impl<T: Real> Transform<T> {
         half.par_chunks_mut(pxh).enumerate().for_each_init(
             || (vec![T::zero(); px], self.r2c.make_scratch_vec()),
             |(row, scratch), (i, out)| {
-                let src = &p[i * nx..(i + 1) * nx];
-                if src.iter().all(|&v| v == 0.0) {
+                if !load(i, &mut row[..nx]) {
                     out.fill(zero);
                     return;
-                }
-                for (d, &s) in row[..nx].iter_mut().zip(src) {
-                    *d = T::of(s);
                 }
                 row[nx..].fill(T::zero());
                 self.r2c
@@ -223,7 +263,7 @@ impl<T: Real> Transform<T> {
             .for_each_init(
                 || (vec![T::zero(); px], self.c2r.make_scratch_vec()),
                 |(row, scratch), (i, (out, inp))| {
-                    if keep.is_some_and(|k| !k(i)) {
+                    if !keep(i) {
                         out.fill(0.0);
                         return;
                     }
@@ -235,11 +275,29 @@ impl<T: Real> Transform<T> {
                     self.c2r
                         .process_with_scratch(inp, row, scratch)
                         .expect("row FFT lengths are fixed by the plan");
-                    for (d, &s) in out.iter_mut().zip(&row[..nx]) {
-                        *d = s.into();
-                    }
+                    store(i, &row[..nx], out);
                 },
             );
+    }
+}
+
+/// Row `src` of an input field into `row` in the transform's type; `false` if it is zero.
+#[inline]
+fn load_row<T: Real>(src: &[f64], row: &mut [T]) -> bool {
+    if src.iter().all(|&v| v == 0.0) {
+        return false;
+    }
+    for (d, &s) in row.iter_mut().zip(src) {
+        *d = T::of(s);
+    }
+    true
+}
+
+/// A transformed row into the output row.
+#[inline]
+fn store_row<T: Real>(_: usize, row: &[T], out: &mut [f64]) {
+    for (d, &s) in out.iter_mut().zip(row) {
+        *d = s.into();
     }
 }
 
@@ -288,11 +346,25 @@ mod tests {
             for (a, b) in u.iter().zip(&d) {
                 assert!((a - b).abs() <= 1e-6 * scale, "{ny}x{nx}: {a} vs {b}");
             }
-            let keep = |i: usize| i % 3 != 1;
+            // Restricted to a set S with rows outside it: χ C χ p against the dense product
+            // of the masked field.
+            let mut support = lcg((ny * 7 + nx) as u64, ny * nx);
+            support.iter_mut().for_each(|v| *v -= 0.4);
+            if ny > 2 {
+                support[nx..2 * nx].fill(-1.0);
+            }
+            let member = |v: f64| v > 0.0;
+            let masked: Vec<f64> = p
+                .iter()
+                .zip(&support)
+                .map(|(&x, &s)| if member(s) { x } else { 0.0 })
+                .collect();
+            let d = dense_apply(&ker, &masked);
+            let scale = max_abs(&d);
             let mut v = vec![f64::NAN; ny * nx];
-            op32.apply_on_rows(&p, &mut v, &keep);
-            for (k, (a, b)) in v.iter().zip(&d).enumerate() {
-                if keep(k / nx) {
+            op32.apply_restricted(&p, &support, member, &mut v);
+            for ((a, b), &s) in v.iter().zip(&d).zip(&support) {
+                if member(s) {
                     assert!((a - b).abs() <= 1e-6 * scale, "{ny}x{nx}: {a} vs {b}");
                 } else {
                     assert_eq!(*a, 0.0);

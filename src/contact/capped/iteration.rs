@@ -212,12 +212,8 @@ fn run_steps(
     let mut t: Vec<f64> = alloc::try_zeroed(n, "the conjugate direction")?;
     let mut r: Vec<f64> = alloc::try_zeroed(n, "the operator work field")?;
     let mut applies = 0usize;
-    // The preconditioner `M = E*|q|/2` and its residual `z = M g` on the free set.
+    // The preconditioner `M = E*|q|/2`; its residual `z = M g` on the free set lives in `r`.
     let mut pre = pre;
-    let mut z: Vec<f64> = match pre {
-        Some(_) => alloc::try_zeroed(n, "the preconditioned residual")?,
-        None => Vec::new(),
-    };
     let mut pre_applies = 0usize;
     let mut last_pre = false;
     let mut best_cert = f64::INFINITY;
@@ -308,7 +304,7 @@ fn run_steps(
         let mut gt = 0.0;
         if let Some(m) = pre {
             if !steepest && n_free as f64 <= pk::PRECONDITION_MAX_FRACTION * n as f64 {
-                let gz = precondition(m, &mut z, &mut r, &p, &g, cap, nx);
+                let gz = precondition(m, &mut r, &p, &g, cap);
                 pre_applies += 1;
                 // β continues only a preconditioned sequence.
                 let beta = if cg && last_pre && g_old > 0.0 {
@@ -316,7 +312,7 @@ fn run_steps(
                 } else {
                     0.0
                 };
-                gt = direction_preconditioned(&mut t, &z, &p, &g, cap, beta);
+                gt = direction_preconditioned(&mut t, &r, &p, &g, cap, beta);
                 if positive(gt) && positive(gz) {
                     preconditioned = true;
                     g_old = gz;
@@ -507,42 +503,16 @@ fn direction(t: &mut [f64], p: &[f64], g: &[f64], cap: f64, beta: f64, steepest:
     parts.iter().sum()
 }
 
-/// The preconditioned residual `z = M (g on F)` restricted to the free set `F = {0 < p < H}`
-/// (`r` is scratch); returns `Σ_F g z`. Rows without a free point skip their FFTs.
-fn precondition(
-    m: &Operator,
-    z: &mut [f64],
-    r: &mut [f64],
-    p: &[f64],
-    g: &[f64],
-    cap: f64,
-    nx: usize,
-) -> f64 {
-    let free = |v: f64| v > 0.0 && v < cap;
-    z.par_chunks_mut(CHUNK)
-        .zip(p.par_chunks(CHUNK))
-        .zip(g.par_chunks(CHUNK))
-        .for_each(|((zc, pc), gc)| {
-            for i in 0..zc.len() {
-                zc[i] = if free(pc[i]) { gc[i] } else { 0.0 };
-            }
-        });
-    let keep = |row: usize| p[row * nx..(row + 1) * nx].iter().any(|&v| free(v));
-    m.apply_on_rows(z, r, &keep);
+/// The preconditioned residual `z = M (g on F)` restricted to the free set `F = {0 < p < H}`,
+/// written into `r` (zero off `F`); returns `Σ_F g z`. Rows without a free point skip their
+/// FFTs.
+fn precondition(m: &Operator, r: &mut [f64], p: &[f64], g: &[f64], cap: f64) -> f64 {
+    m.apply_restricted(g, p, |v: f64| v > 0.0 && v < cap, r);
     let r = &*r;
-    let parts: Vec<f64> = z
-        .par_chunks_mut(CHUNK)
-        .enumerate()
-        .map(|(c, zc)| {
-            let lo = c * CHUNK;
-            let mut s = 0.0;
-            for (i, zi) in zc.iter_mut().enumerate() {
-                let v = if free(p[lo + i]) { r[lo + i] } else { 0.0 };
-                *zi = v;
-                s += g[lo + i] * v;
-            }
-            s
-        })
+    let parts: Vec<f64> = g
+        .par_chunks(CHUNK)
+        .zip(r.par_chunks(CHUNK))
+        .map(|(gc, zc)| gc.iter().zip(zc).fold(0.0, |s, (x, y)| s + x * y))
         .collect();
     parts.iter().sum()
 }

@@ -171,7 +171,6 @@ pub(super) fn run(
         parts: vec![Acc::ZERO; n_chunks],
         applies: 0,
         pre: None,
-        z: Vec::new(),
         pre_applies: 0,
     };
     if opts.precondition {
@@ -181,7 +180,6 @@ pub(super) fn run(
             pre.single()?;
         }
         w.pre = Some(pre);
-        w.z = alloc::try_zeroed(n, "the preconditioned residual")?;
     }
 
     // Initial pressure: the warm start, or p = 0 (displacement) / uniform p̄ (load, the paper's).

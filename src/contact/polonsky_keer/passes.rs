@@ -195,10 +195,9 @@ pub(super) struct Work<'a> {
     pub(super) periodic: bool,
     pub(super) parts: Vec<Acc>,
     pub(super) applies: usize,
-    /// Preconditioner (periodic inverse compliance on the `ny × nx` grid), its diagonal, the
-    /// preconditioned residual `z = M g` on `I_c`, and the number of its applications.
+    /// Preconditioner (periodic inverse compliance on the `ny × nx` grid) and the number of
+    /// its applications; the preconditioned residual `z = M g` on `I_c` lives in `r`.
     pub(super) pre: Option<Operator>,
-    pub(super) z: Vec<f64>,
     pub(super) pre_applies: usize,
 }
 
@@ -417,21 +416,10 @@ impl Work<'_> {
         }
     }
 
-    /// Preconditioned residual `z = M (g on I_c)` restricted to `I_c`; returns `Σ_{I_c} g z`
-    /// (in `gt`). `r` is scratch here (between an update and the next product `C t`).
+    /// Preconditioned residual `z = M (g on I_c)` restricted to `I_c`, written into `r` (zero
+    /// off `I_c`; `r` is scratch between an update and the next product `C t`); returns
+    /// `Σ_{I_c} g z` (in `gt`).
     pub(super) fn precondition(&mut self) -> Acc {
-        let Work { p, g, z, r, .. } = self;
-        z.par_chunks_mut(CHUNK)
-            .zip(p.par_chunks(CHUNK))
-            .zip(g.par_chunks(CHUNK))
-            .for_each(|((zc, pc), gc)| {
-                for i in 0..zc.len() {
-                    zc[i] = if pc[i] > 0.0 { gc[i] } else { 0.0 };
-                }
-            });
-        // z is only needed on I_c: rows without a contact point skip their inverse row FFT.
-        let nx = self.nx;
-        let in_contact = |i: usize| p[i * nx..(i + 1) * nx].iter().any(|&v| v > 0.0);
         // In f32 with the operator's f32 twin (the single-precision switch, module docs): an
         // approximate preconditioner changes the rate a little, not the answer. The twin is
         // built with the preconditioner (driver), so `single()` only hands it out.
@@ -439,36 +427,34 @@ impl Work<'_> {
             .pre
             .as_ref()
             .expect("precondition() needs a preconditioner");
+        let (p, g, r) = (&self.p, &self.g, &mut self.r);
+        let in_contact = |v: f64| v > 0.0;
         match (self.single.is_some(), pre.single()) {
-            (true, Ok(single)) => single.apply_on_rows(z, r, &in_contact),
-            _ => pre.apply_on_rows(z, r, &in_contact),
+            (true, Ok(single)) => single.apply_restricted(g, p, in_contact, r),
+            _ => pre.apply_restricted(g, p, in_contact, r),
         }
         self.pre_applies += 1;
-        let (p, g, r) = (&self.p, &self.g, &self.r);
+        let r = &self.r;
         self.parts
             .par_iter_mut()
-            .zip(self.z.par_chunks_mut(CHUNK))
+            .zip(g.par_chunks(CHUNK))
             .enumerate()
-            .for_each(|(c, (acc, zc))| {
-                let lo = c * CHUNK;
+            .for_each(|(c, (acc, gc))| {
+                let zc = &r[c * CHUNK..c * CHUNK + gc.len()];
                 let mut a = Acc::ZERO;
-                for i in 0..zc.len() {
-                    let zi = if p[lo + i] > 0.0 { r[lo + i] } else { 0.0 };
-                    zc[i] = zi;
-                    a.gt += g[lo + i] * zi;
-                }
+                a.gt = gc.iter().zip(zc).fold(0.0, |s, (x, y)| s + x * y);
                 *acc = a;
             });
         combine(&self.parts)
     }
 
-    /// Step 2 with the preconditioned residual: `t = z + β t` on `I_c`, 0 elsewhere. Returns
-    /// `Σ g t`, `Σ_W t`, `|W|`.
+    /// Step 2 with the preconditioned residual `z` (in `r`, from [`Work::precondition`]):
+    /// `t = z + β t` on `I_c`, 0 elsewhere. Returns `Σ g t`, `Σ_W t`, `|W|`.
     pub(super) fn direction_preconditioned(&mut self, beta: f64) -> Acc {
         let Work {
-            p, g, z, t, parts, ..
+            p, g, r, t, parts, ..
         } = self;
-        let z = &*z;
+        let z = &*r;
         rewrite_t(parts, t, p, g, |k, pk, gk, tk, a| {
             if pk > 0.0 {
                 let ti = z[k] + beta * tk;
