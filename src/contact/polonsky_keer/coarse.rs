@@ -44,6 +44,11 @@
 //!
 //! # Cost
 //!
+//! A free level's Love table is not evaluated afresh: the kernel is homogeneous of degree one,
+//! so it is the finer table's leading block times two, bit for bit
+//! ([`crate::elastic::kernel::try_coarsened_table`]), when the finer level has its table
+//! (every solve through [`super::solve_with_kernel`], the bindings' path).
+//!
 //! A product on the coarse grid costs about a quarter of a fine one; the levels together cost
 //! about a third of the coarsest-to-finest products taken at the fine size. The fine solve's
 //! [`Solution`] reports the coarse levels' raw counts and their fine-grid equivalents

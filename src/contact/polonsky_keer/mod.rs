@@ -298,7 +298,7 @@ pub use validate::check_hardness;
 pub(crate) use validate::validate;
 
 pub use crate::contact::problem::{CoarseCost, Control, Options, Problem, Solution, DEFAULT_TOL};
-use crate::elastic::kernel::Kernel;
+use crate::elastic::kernel::{try_coarsened_table, Kernel};
 use crate::elastic::memory;
 use crate::elastic::operator::Operator;
 use crate::error::{Error, Result};
@@ -421,6 +421,7 @@ pub fn solve(
         initial,
         Finish::Confirmed,
         MAX_COARSE_LEVELS,
+        None,
     )
 }
 
@@ -435,7 +436,9 @@ pub(crate) enum Finish {
     Incremental,
 }
 
-/// [`solve`] ending as `finish` says, with at most `levels` coarse levels below it.
+/// [`solve`] ending as `finish` says, with at most `levels` coarse levels below it. `finer`:
+/// the free Love table (and its columns) of the grid this one coarsens, if there is one; this
+/// level's table is then its leading block times two ([`try_coarsened_table`]).
 pub(crate) fn solve_level(
     problem: &Problem,
     control: Control,
@@ -443,16 +446,32 @@ pub(crate) fn solve_level(
     initial: Option<&[f64]>,
     finish: Finish,
     levels: usize,
+    finer: Option<(&[f64], usize)>,
 ) -> Result<Solution> {
     validate_elastic(problem, control, opts, initial)?;
     check_memory(problem, opts)?;
+    let (ny, nx) = (problem.ny, problem.nx);
+    let kernel = match (problem.boundary, finer) {
+        (Boundary::Free, Some((table, fine_nx))) => Some(Kernel::from_table(
+            ny,
+            nx,
+            problem.dx,
+            problem.e_star,
+            try_coarsened_table(table, fine_nx, ny, nx)?,
+        )),
+        _ => None,
+    };
     // The coarse levels run before the fine operator exists, so their memory is not added
     // to its.
+    let own = kernel.as_ref().map(|k| (k.table.as_slice(), nx));
     let start = (
         initial,
-        coarse_start(problem, control, opts, initial, levels)?,
+        coarse_start(problem, control, opts, initial, levels, own)?,
     );
-    let (op, kernel) = operator_for(problem)?;
+    let (op, kernel) = match kernel {
+        Some(k) => (Operator::try_free(&k)?, Some(k)),
+        None => operator_for(problem)?,
+    };
     let table = kernel.as_ref().map(|k| k.table.as_slice());
     run_from(&op, table, problem, control, opts, start, finish)
 }
@@ -475,17 +494,19 @@ pub(crate) fn operator_for(problem: &Problem) -> Result<(Operator, Option<Kernel
     }
 }
 
-/// The coarse-level start of a cold solve, if [`Options::coarse_start`] asks for one.
+/// The coarse-level start of a cold solve, if [`Options::coarse_start`] asks for one. `table`:
+/// the problem's free Love table (and its columns), from which the coarse levels take theirs.
 fn coarse_start(
     problem: &Problem,
     control: Control,
     opts: &Options,
     initial: Option<&[f64]>,
     levels: usize,
+    table: Option<(&[f64], usize)>,
 ) -> Result<CoarseStart> {
     if levels > 0 && coarse::applies_to(problem.ny, problem.nx, opts, initial) {
         coarse::start(problem, control, opts, levels, |p, c, o, below| {
-            solve_level(p, c, o, None, Finish::Incremental, below)
+            solve_level(p, c, o, None, Finish::Incremental, below, table)
         })
     } else {
         Ok(None)
@@ -544,9 +565,14 @@ pub fn solve_with_kernel(
 ) -> Result<Solution> {
     validate_elastic(problem, control, opts, initial)?;
     check_operator(op, table, problem)?;
+    // A free problem's table is the Love table its coarse levels are made from.
+    let love = match problem.boundary {
+        Boundary::Free => table.map(|t| (t, problem.nx)),
+        Boundary::Periodic => None,
+    };
     let start = (
         initial,
-        coarse_start(problem, control, opts, initial, MAX_COARSE_LEVELS)?,
+        coarse_start(problem, control, opts, initial, MAX_COARSE_LEVELS, love)?,
     );
     run_from(op, table, problem, control, opts, start, Finish::Confirmed)
 }

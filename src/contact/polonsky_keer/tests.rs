@@ -807,8 +807,8 @@ fn caller_kernel_table_and_incremental_finish() {
             // An incremental finish stops on the updated state: the same contact set at a
             // looser tolerance, no confirming product, no displacement unless fresh.
             let loose = opts(1e-6);
-            let c = solve_level(&pr, control, &loose, None, Finish::Confirmed, 0).unwrap();
-            let d = solve_level(&pr, control, &loose, None, Finish::Incremental, 0).unwrap();
+            let c = solve_level(&pr, control, &loose, None, Finish::Confirmed, 0, None).unwrap();
+            let d = solve_level(&pr, control, &loose, None, Finish::Incremental, 0, None).unwrap();
             assert!(d.fft_products <= c.fft_products);
             assert_eq!(c.iterations, d.iterations);
             assert_eq!(c.pressure, d.pressure);
