@@ -104,6 +104,7 @@ use super::problem::{CoarseCost, Control, Options, Problem, Solution, Solver};
 use crate::elastic::kernel::love_displacement;
 use crate::elastic::operator::Operator;
 use crate::error::{Error, Result};
+use crate::grid::Boundary;
 
 /// Relative accuracy of the mean pressure in load control (or the solve's `tol`, if larger).
 pub const LOAD_RTOL: f64 = 1e-10;
@@ -148,7 +149,7 @@ pub fn solve(
 ) -> Result<Solution> {
     check(problem, control, opts, initial)?;
     pk::check_memory(problem, opts)?;
-    solve_level(problem, control, opts, initial, pk::MAX_COARSE_LEVELS)
+    solve_level(problem, control, opts, initial, pk::MAX_COARSE_LEVELS, None)
 }
 
 /// The capped solve on the caller's operator and influence table (as
@@ -191,15 +192,18 @@ fn check(
     Ok(())
 }
 
-/// The capped solve with at most `levels` coarse levels (operator built here).
+/// The capped solve with at most `levels` coarse levels (operator built here; a free level's
+/// Love table from `finer`, the table of the grid it coarsens, when there is one).
 fn solve_level(
     problem: &Problem,
     control: Control,
     opts: &Options,
     initial: Option<&[f64]>,
     levels: usize,
+    finer: Option<(&[f64], usize)>,
 ) -> Result<Solution> {
-    let (op, kernel) = pk::operator_for(problem)?;
+    let kernel = pk::coarsened_kernel(problem, finer)?;
+    let (op, kernel) = pk::operator_with(problem, kernel)?;
     let table = kernel.as_ref().map(|k| k.table.as_slice());
     solve_with_operator(&op, table, problem, control, opts, initial, levels)
 }
@@ -238,8 +242,13 @@ fn solve_with_operator(
         }
         if levels > 0 && coarse::applies_to(problem.ny, problem.nx, opts, initial) {
             // The coarse levels are capped solves too; only their pressure is used.
+            // A free level's table is the one its coarse levels take theirs from.
+            let love = match problem.boundary {
+                Boundary::Free => table.map(|t| (t, problem.nx)),
+                Boundary::Periodic => None,
+            };
             let level = |p: &Problem, c: Control, o: &Options, below: usize| {
-                solve_level(p, c, o, None, below)
+                solve_level(p, c, o, None, below, love)
             };
             if let Some((p, cost)) = coarse::start(problem, control, opts, levels, level)? {
                 return Ok((Some(p), cost));

@@ -47,7 +47,8 @@
 //! A free level's Love table is not evaluated afresh: the kernel is homogeneous of degree one,
 //! so it is the finer table's leading block times two, bit for bit
 //! ([`crate::elastic::kernel::try_coarsened_table`]), when the finer level has its table
-//! (every solve through [`super::solve_with_kernel`], the bindings' path).
+//! (every solve through [`super::solve_with_kernel`], the bindings' path, and the capped solver's
+//! levels).
 //!
 //! A product on the coarse grid costs about a quarter of a fine one; the levels together cost
 //! about a third of the coarsest-to-finest products taken at the fine size. The fine solve's

@@ -450,8 +450,27 @@ pub(crate) fn solve_level(
 ) -> Result<Solution> {
     validate_elastic(problem, control, opts, initial)?;
     check_memory(problem, opts)?;
+    let kernel = coarsened_kernel(problem, finer)?;
+    // The coarse levels run before the fine operator exists, so their memory is not added
+    // to its.
+    let own = kernel.as_ref().map(|k| (k.table.as_slice(), problem.nx));
+    let start = (
+        initial,
+        coarse_start(problem, control, opts, initial, levels, own)?,
+    );
+    let (op, kernel) = operator_with(problem, kernel)?;
+    let table = kernel.as_ref().map(|k| k.table.as_slice());
+    run_from(&op, table, problem, control, opts, start, finish)
+}
+
+/// A free level's Love kernel from `finer`, the table (and its columns) of the grid it
+/// coarsens by two ([`try_coarsened_table`]); `None` without one or for a periodic level.
+pub(crate) fn coarsened_kernel(
+    problem: &Problem,
+    finer: Option<(&[f64], usize)>,
+) -> Result<Option<Kernel>> {
     let (ny, nx) = (problem.ny, problem.nx);
-    let kernel = match (problem.boundary, finer) {
+    Ok(match (problem.boundary, finer) {
         (Boundary::Free, Some((table, fine_nx))) => Some(Kernel::from_table(
             ny,
             nx,
@@ -460,20 +479,19 @@ pub(crate) fn solve_level(
             try_coarsened_table(table, fine_nx, ny, nx)?,
         )),
         _ => None,
-    };
-    // The coarse levels run before the fine operator exists, so their memory is not added
-    // to its.
-    let own = kernel.as_ref().map(|k| (k.table.as_slice(), nx));
-    let start = (
-        initial,
-        coarse_start(problem, control, opts, initial, levels, own)?,
-    );
-    let (op, kernel) = match kernel {
-        Some(k) => (Operator::try_free(&k)?, Some(k)),
-        None => operator_for(problem)?,
-    };
-    let table = kernel.as_ref().map(|k| k.table.as_slice());
-    run_from(&op, table, problem, control, opts, start, finish)
+    })
+}
+
+/// The operator of `problem` from its free Love `kernel` when one is given, else
+/// [`operator_for`].
+pub(crate) fn operator_with(
+    problem: &Problem,
+    kernel: Option<Kernel>,
+) -> Result<(Operator, Option<Kernel>)> {
+    match kernel {
+        Some(k) => Ok((Operator::try_free(&k)?, Some(k))),
+        None => operator_for(problem),
+    }
 }
 
 /// The FFT operator of `problem`, and (free boundary) the Love kernel it is built from, whose
