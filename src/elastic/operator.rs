@@ -238,6 +238,37 @@ pub fn dense_apply(kernel: &Kernel, p: &[f64]) -> Vec<f64> {
         .collect()
 }
 
+/// Tests of a restricted product: `u` from `apply_restricted(p, support, member, u)` equals
+/// the dense product of `p` masked to `S = {member(support)}` within `rel` of its largest value
+/// on `S`, and is exactly zero off `S`.
+#[cfg(test)]
+pub fn assert_restricted_is_dense(
+    kernel: &Kernel,
+    p: &[f64],
+    support: &[f64],
+    member: impl Fn(f64) -> bool + Copy,
+    rel: f64,
+    apply_restricted: impl Fn(&[f64], &[f64], &mut [f64]),
+) {
+    let masked: Vec<f64> = p
+        .iter()
+        .zip(support)
+        .map(|(&x, &s)| if member(s) { x } else { 0.0 })
+        .collect();
+    let d = dense_apply(kernel, &masked);
+    let scale = d.iter().fold(0.0f64, |a, &v| a.max(v.abs()));
+    let mut u = vec![f64::NAN; p.len()];
+    apply_restricted(p, support, &mut u);
+    let (ny, nx) = (kernel.ny, kernel.nx);
+    for ((a, b), &s) in u.iter().zip(&d).zip(support) {
+        if member(s) {
+            assert!((a - b).abs() <= rel * scale, "{ny}x{nx}: {a} vs {b}");
+        } else {
+            assert_eq!(*a, 0.0);
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -316,22 +347,9 @@ mod tests {
             support[nx..2 * nx].fill(0.9);
             support[5 * nx..6 * nx].fill(0.0);
             let member = |v: f64| v > 0.2 && v < 0.7;
-            let masked: Vec<f64> = p
-                .iter()
-                .zip(&support)
-                .map(|(&x, &s)| if member(s) { x } else { 0.0 })
-                .collect();
-            let d = dense_apply(&ker, &masked);
-            let scale = d.iter().fold(0.0f64, |a, &v| a.max(v.abs()));
-            let mut v = vec![f64::NAN; ny * nx];
-            op.apply_restricted(&p, &support, member, &mut v);
-            for ((a, b), &s) in v.iter().zip(&d).zip(&support) {
-                if member(s) {
-                    assert!((a - b).abs() <= 1e-12 * scale, "{ny}x{nx}: {a} vs {b}");
-                } else {
-                    assert_eq!(*a, 0.0);
-                }
-            }
+            assert_restricted_is_dense(&ker, &p, &support, member, 1e-12, |x, s, u| {
+                op.apply_restricted(x, s, member, u)
+            });
         }
         // The periodic operator of a field with zero rows against its restricted product on
         // every point (zero rows then transformed, to round-off-free zeros): the same values.

@@ -310,7 +310,7 @@ unsafe impl<T> Sync for SyncPtr<T> {}
 #[cfg(test)]
 mod tests {
     use crate::elastic::kernel::Kernel;
-    use crate::elastic::operator::{dense_apply, Operator};
+    use crate::elastic::operator::{assert_restricted_is_dense, dense_apply, Operator};
 
     fn lcg(seed: u64, n: usize) -> Vec<f64> {
         let mut s = seed;
@@ -354,22 +354,9 @@ mod tests {
                 support[nx..2 * nx].fill(-1.0);
             }
             let member = |v: f64| v > 0.0;
-            let masked: Vec<f64> = p
-                .iter()
-                .zip(&support)
-                .map(|(&x, &s)| if member(s) { x } else { 0.0 })
-                .collect();
-            let d = dense_apply(&ker, &masked);
-            let scale = max_abs(&d);
-            let mut v = vec![f64::NAN; ny * nx];
-            op32.apply_restricted(&p, &support, member, &mut v);
-            for ((a, b), &s) in v.iter().zip(&d).zip(&support) {
-                if member(s) {
-                    assert!((a - b).abs() <= 1e-6 * scale, "{ny}x{nx}: {a} vs {b}");
-                } else {
-                    assert_eq!(*a, 0.0);
-                }
-            }
+            assert_restricted_is_dense(&ker, &p, &support, member, 1e-6, |x, s, u| {
+                op32.apply_restricted(x, s, member, u)
+            });
         }
     }
 
