@@ -104,7 +104,6 @@ use super::problem::{CoarseCost, Control, Options, Problem, Solution, Solver};
 use crate::elastic::kernel::love_displacement;
 use crate::elastic::operator::Operator;
 use crate::error::{Error, Result};
-use crate::grid::Boundary;
 
 /// Relative accuracy of the mean pressure in load control (or the solve's `tol`, if larger).
 pub const LOAD_RTOL: f64 = 1e-10;
@@ -242,11 +241,7 @@ fn solve_with_operator(
         }
         if levels > 0 && coarse::applies_to(problem.ny, problem.nx, opts, initial) {
             // The coarse levels are capped solves too; only their pressure is used.
-            // A free level's table is the one its coarse levels take theirs from.
-            let love = match problem.boundary {
-                Boundary::Free => table.map(|t| (t, problem.nx)),
-                Boundary::Periodic => None,
-            };
+            let love = pk::finer_table(problem, table);
             let level = |p: &Problem, c: Control, o: &Options, below: usize| {
                 solve_level(p, c, o, None, below, love)
             };

@@ -463,6 +463,19 @@ pub(crate) fn solve_level(
     run_from(&op, table, problem, control, opts, start, finish)
 }
 
+/// The influence table of a level as the `finer` table of its coarse levels: a free level's
+/// (the Love table) with its columns; `None` for a periodic level, whose table is the
+/// circulant's.
+pub(crate) fn finer_table<'a>(
+    problem: &Problem,
+    table: Option<&'a [f64]>,
+) -> Option<(&'a [f64], usize)> {
+    match problem.boundary {
+        Boundary::Free => table.map(|t| (t, problem.nx)),
+        Boundary::Periodic => None,
+    }
+}
+
 /// A free level's Love kernel from `finer`, the table (and its columns) of the grid it
 /// coarsens by two ([`try_coarsened_table`]); `None` without one or for a periodic level.
 pub(crate) fn coarsened_kernel(
@@ -583,14 +596,16 @@ pub fn solve_with_kernel(
 ) -> Result<Solution> {
     validate_elastic(problem, control, opts, initial)?;
     check_operator(op, table, problem)?;
-    // A free problem's table is the Love table its coarse levels are made from.
-    let love = match problem.boundary {
-        Boundary::Free => table.map(|t| (t, problem.nx)),
-        Boundary::Periodic => None,
-    };
     let start = (
         initial,
-        coarse_start(problem, control, opts, initial, MAX_COARSE_LEVELS, love)?,
+        coarse_start(
+            problem,
+            control,
+            opts,
+            initial,
+            MAX_COARSE_LEVELS,
+            finer_table(problem, table),
+        )?,
     );
     run_from(op, table, problem, control, opts, start, Finish::Confirmed)
 }
