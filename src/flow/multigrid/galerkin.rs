@@ -103,28 +103,5 @@ pub(super) fn galerkin(g: &impl Rows, ip: &Interp, delta: &[f64], nc: usize) -> 
         })
         .collect();
     let (ptr, col, w) = concat(blocks);
-    let d: Vec<f64> = (0..nc)
-        .into_par_iter()
-        .with_min_len(CHUNK)
-        .map(|i| {
-            // From the stored (rounded) faces: the level is the conductance form of its
-            // rounded faces exactly.
-            let row = &w[ptr[i]..ptr[i + 1]];
-            let s = dir[i] + row.iter().map(|&v| f64::from(v)).sum::<f64>();
-            // A positive definite operator has a positive diagonal; guard round-off.
-            if s > 0.0 {
-                s
-            } else {
-                row.iter().map(|&v| f64::from(v).abs()).sum::<f64>() + dir[i]
-            }
-        })
-        .collect();
-    Graph {
-        n: nc,
-        ptr,
-        col,
-        w,
-        dir,
-        d,
-    }
+    Graph::from_faces(ptr, col, w, dir)
 }

@@ -1,5 +1,16 @@
 //! Classical (Ruge–Stüben) algebraic multigrid preconditioner for the Reynolds operator.
 //!
+//! # The finest level: red cells eliminated exactly
+//!
+//! The five-point stencil joins each cell only to cells of the other colour of a
+//! checkerboard, so the red half of the unknowns is eliminated exactly ([`reduce`]): the
+//! preconditioner is the block factorisation `L diag(D_R, S) Lᵀ` of the fine operator with
+//! the Schur complement `S` on the black half replaced by one V-cycle of the classical
+//! multigrid below. Nothing of the finest level is smoothed or interpolated, and `S` is
+//! formed from the stencil directly; against a classical first coarsening (its splitting
+//! halved the unknowns too) this took the 4097² gap's multigrid from 42 to 39 CG iterations,
+//! its cycle from 0.45 to 0.29 s and its setup from 12.3 to 6.8 s (docs/flow.md).
+//!
 //! # Why classical coarsening
 //!
 //! Near the percolation threshold the spanning cluster is a maze of necks, dead ends and
@@ -15,7 +26,8 @@
 //!
 //! # Construction
 //!
-//! On the conductance form `(A x)_i = d_i x_i − Σ_j w_ij x_j`, `d_i = dir_i + Σ_j w_ij`:
+//! Below `S`, on the conductance form `(A x)_i = d_i x_i − Σ_j w_ij x_j`,
+//! `d_i = dir_i + Σ_j w_ij`:
 //!
 //! - strength: `j` strongly influences `i` when `w_ij ≥ θ max_k w_ik` (`θ` = [`THETA`];
 //!   only `w_ij > 0` counts);
@@ -46,7 +58,7 @@
 //!
 //! # Cycle
 //!
-//! A V-cycle: one sweep of ℓ1 hybrid Gauss–Seidel before the coarse correction and one
+//! A V-cycle on `S`: one sweep of ℓ1 hybrid Gauss–Seidel before the coarse correction and one
 //! reversed sweep after it. Rows lie in fixed blocks of [`CHUNK`]: Gauss–Seidel inside a
 //! block, other blocks' values from before the sweep, and each row's divisor enlarged by the
 //! faces it has outside its block,
@@ -64,23 +76,23 @@
 //!
 //! # Storage
 //!
-//! The finest level is never copied into compressed rows: the setup reads its rows from
-//! the grid stencil through the map from cells to unknowns ([`rows`]), and the cycle
-//! applies it from the stencil too (4 bytes per cell instead of some 56 per unknown).
-//! Coarse faces and interpolation weights are stored in single precision; each coarse
-//! diagonal is summed from the rounded faces, so a level is exactly the conductance form of
-//! its rounded faces (each face changed by at most 2^-24 of itself: where the faces are
-//! positive the level's energy `Σ w_ij (x_i − x_j)² + Σ dir_i x_i²` changes by at most that
-//! fraction, however ill-conditioned the level) and the next level is built from what is stored. Vectors, the cycle's
-//! arithmetic and CG stay in double precision: the preconditioner changes a little, the
-//! answer is that of the exact fine operator. Each level's reservoir part is freed once
-//! the level below it is built.
+//! The finest level is never copied into compressed rows: the reduction and the operator
+//! read its rows from the grid stencil through the map from cells to unknowns ([`rows`]).
+//! `S` and the coarser levels store their faces and interpolation weights in single
+//! precision; each diagonal is summed from the rounded faces, so a level is exactly the
+//! conductance form of its rounded faces (each face changed by at most 2^-24 of itself:
+//! where the faces are positive the level's energy `Σ w_ij (x_i − x_j)² + Σ dir_i x_i²`
+//! changes by at most that fraction, however ill-conditioned the level) and the next level
+//! is built from what is stored. Vectors, the cycle's arithmetic and CG stay in double
+//! precision: the preconditioner changes a little, the answer is that of the exact fine
+//! operator. Each level's reservoir part is freed once the level below it is built.
 
 mod coarsen;
 mod coarsest;
 mod cycle;
 mod galerkin;
 mod interpolate;
+mod reduce;
 mod rows;
 #[cfg(test)]
 mod tests;
@@ -99,6 +111,7 @@ use coarsest::DenseCholesky;
 use cycle::{vcycle, Fine, SharedMut};
 use galerkin::galerkin;
 use interpolate::interpolation;
+use reduce::Reduction;
 use rows::Rows;
 
 /// Strength threshold θ.
@@ -158,6 +171,9 @@ pub struct Multigrid {
     index: Vec<u32>,
     /// Entries off the diagonal of the finest level.
     fine_entries: usize,
+    /// The finest level's red unknowns eliminated exactly; `levels[0]` is then their Schur
+    /// complement `S` ([`reduce`]). `None` when the finest level is the coarsest.
+    reduction: Option<Reduction>,
     levels: Vec<Graph>,
     /// `interps[l]`: `levels[l]` → `levels[l + 1]`.
     interps: Vec<Interp>,
@@ -166,13 +182,13 @@ pub struct Multigrid {
 }
 
 /// Bytes of the hierarchy for `unknowns` fine unknowns, its setup's transient vectors
-/// included. Built, [`Multigrid::bytes`] is 165–166 bytes per unknown on random fields with
-/// a third of the cells closed (operator complexity 2.2; `multigrid_memory_estimate_is_honest`
-/// in the tests): single-precision faces and weights, the finest level never in compressed
-/// rows. Measured on contact gaps (docs/flow.md): the resident set grows by about 150
-/// bytes per unknown from the start to the end of the setup at 4097² and 8193².
+/// included. Built, [`Multigrid::bytes`] is about 106 bytes per unknown on random fields with
+/// a third of the cells closed (`multigrid_memory_estimate_is_honest` in the tests): the red
+/// half of the finest level eliminated, its Schur complement and the levels below in
+/// single-precision faces and weights. Measured on a 4097² contact gap (docs/flow.md): the
+/// resident set grows by about 90 bytes per unknown from the start to the end of the setup.
 pub fn memory_estimate(unknowns: usize) -> u64 {
-    unknowns as u64 * 220
+    unknowns as u64 * 150
 }
 
 impl Graph {
@@ -225,6 +241,35 @@ impl Graph {
                 }
             }
         });
+    }
+
+    /// The level with faces `w` in compressed rows (`ptr`, `col`) and reservoir parts `dir`,
+    /// each diagonal summed from the stored (rounded) faces: the level is the conductance form
+    /// of its rounded faces exactly.
+    fn from_faces(ptr: Vec<usize>, col: Vec<u32>, w: Vec<f32>, dir: Vec<f64>) -> Self {
+        let n = dir.len();
+        let d: Vec<f64> = (0..n)
+            .into_par_iter()
+            .with_min_len(CHUNK)
+            .map(|i| {
+                let row = &w[ptr[i]..ptr[i + 1]];
+                let s = dir[i] + row.iter().map(|&v| f64::from(v)).sum::<f64>();
+                // A positive definite operator has a positive diagonal; guard round-off.
+                if s > 0.0 {
+                    s
+                } else {
+                    row.iter().map(|&v| f64::from(v).abs()).sum::<f64>() + dir[i]
+                }
+            })
+            .collect();
+        Graph {
+            n,
+            ptr,
+            col,
+            w,
+            dir,
+            d,
+        }
     }
 
     /// Entries off the diagonal.
@@ -327,12 +372,23 @@ impl Multigrid {
             .sum();
         let mut levels = Vec::new();
         let mut interps = Vec::new();
+        let mut reduction = None;
         if n0 > COARSEST {
-            if let Some((ip, c)) = coarsen(&top) {
-                // The finest level: its size only (the cycle applies the stencil).
-                levels.push(Graph::sized(n0));
-                interps.push(ip);
-                levels.push(c);
+            let t = Instant::now();
+            let red = Reduction::new(&top);
+            if red.len() > 0 {
+                let s = red.schur(&top);
+                if profiling() {
+                    eprintln!(
+                        "[flow profile] red unknowns of {n0} eliminated -> {}: Schur complement \
+                         {:.3} s ({} entries)",
+                        s.n,
+                        secs(t),
+                        s.col.len()
+                    );
+                }
+                levels.push(s);
+                reduction = Some(red);
             }
         }
         if levels.is_empty() {
@@ -349,30 +405,20 @@ impl Multigrid {
             interps.push(ip);
             levels.push(c);
         }
-        // The finest level's right-hand side and solution are the caller's vectors: only
-        // its scratch is kept (none when it is the coarsest, solved by the dense factor).
+        // Without the reduction the finest level is the coarsest, solved by the dense
+        // factor on the caller's vectors: no buffers.
         let bufs = levels
             .iter()
-            .enumerate()
-            .map(|(l, g)| {
-                let n = g.n;
-                if l == 0 {
-                    let n = if levels.len() > 1 { n } else { 0 };
-                    Buffers {
-                        x: Vec::new(),
-                        b: Vec::new(),
-                        r: vec![0.0; n],
-                    }
-                } else {
-                    Buffers {
-                        x: vec![0.0; n],
-                        b: vec![0.0; n],
-                        r: vec![0.0; n],
-                    }
+            .map(|g| {
+                let n = if reduction.is_some() { g.n } else { 0 };
+                Buffers {
+                    x: vec![0.0; n],
+                    b: vec![0.0; n],
+                    r: vec![0.0; n],
                 }
             })
             .collect();
-        let coarse = if levels.len() == 1 {
+        let coarse = if reduction.is_none() {
             DenseCholesky::new(&top)
         } else {
             DenseCholesky::new(levels.last().expect("non-empty"))
@@ -392,6 +438,7 @@ impl Multigrid {
             cells,
             index,
             fine_entries,
+            reduction,
             levels,
             interps,
             bufs: Mutex::new(bufs),
@@ -406,7 +453,10 @@ impl Multigrid {
 
     /// Unknowns per level, the finest first.
     pub fn sizes(&self) -> Vec<usize> {
-        self.levels.iter().map(|g| g.n).collect()
+        let below = self.reduction.is_some().then_some(&self.levels[..]);
+        std::iter::once(self.cells.len())
+            .chain(below.into_iter().flatten().map(|g| g.n))
+            .collect()
     }
 
     /// Bytes held by the hierarchy (the fine stencil not counted).
@@ -423,6 +473,7 @@ impl Multigrid {
                 .sum()
         };
         (4 * (self.cells.len() + self.index.len())
+            + self.reduction.as_ref().map_or(0, Reduction::bytes)
             + work
             + self.levels.iter().map(g).sum::<usize>()
             + self.interps.iter().map(p).sum::<usize>()) as u64
@@ -431,8 +482,12 @@ impl Multigrid {
     /// Operator complexity: entries (diagonal included) of all levels over the finest's.
     pub fn complexity(&self) -> f64 {
         let e = |g: &Graph| (g.entries() + g.n) as f64;
-        let fine = (self.fine_entries + self.levels[0].n) as f64;
-        (fine + self.levels[1..].iter().map(e).sum::<f64>()) / fine
+        let fine = (self.fine_entries + self.cells.len()) as f64;
+        let below: f64 = match self.reduction {
+            Some(_) => self.levels.iter().map(e).sum(),
+            None => 0.0,
+        };
+        (fine + below) / fine
     }
 
     /// The finest operator, the hierarchy dropped.
@@ -442,7 +497,7 @@ impl Multigrid {
 
     /// Number of levels, the finest included.
     pub fn n_levels(&self) -> usize {
-        self.levels.len()
+        self.sizes().len()
     }
 
     /// `z = M⁻¹ r` on the grid's cells (0 on cells without unknowns): one V-cycle from 0.
@@ -511,18 +566,31 @@ impl Multigrid {
             .residual_compensated_on(&self.cells, &self.index, x, b, r, CHUNK);
     }
 
-    /// `z = M⁻¹ r` on the unknowns: one V-cycle from 0.
+    /// `z = M⁻¹ r` on the unknowns: the red unknowns eliminated, one V-cycle from 0 on
+    /// their Schur complement ([`reduce`]); the dense factor when the finest level is the
+    /// coarsest.
     pub fn precondition(&self, r: &[f64], z: &mut [f64]) {
+        let Some(red) = &self.reduction else {
+            self.coarse.solve(r, z);
+            return;
+        };
         let mut bufs = self.bufs.lock().unwrap_or_else(|e| e.into_inner());
         let top = self.top();
+        // The Schur complement's right-hand side and solution, out of their buffers for the
+        // cycle (no copy) and put back after.
+        let mut b = std::mem::take(&mut bufs[0].b);
+        let mut x = std::mem::take(&mut bufs[0].x);
+        red.restrict(&top, r, &mut b);
         vcycle(
             &self.levels,
             &self.interps,
-            r,
-            z,
+            &b,
+            &mut x,
             &mut bufs,
             &self.coarse,
-            Some(&top),
         );
+        red.extend(&top, r, &x, z);
+        bufs[0].b = b;
+        bufs[0].x = x;
     }
 }

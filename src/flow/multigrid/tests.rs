@@ -171,3 +171,102 @@ fn split_in_blocks_is_the_same_on_one_and_two_threads() {
     };
     assert_eq!(run(1), run(2));
 }
+
+/// A stencil with a fifth of the cells closed and six decades of conductance.
+fn holed(seed: u64, ny: usize, nx: usize, periodic: bool) -> Stencil {
+    let u = uniform(seed, ny * nx);
+    let c: Vec<f64> = uniform(seed + 50, ny * nx)
+        .iter()
+        .zip(&u)
+        .map(|(&v, &o)| if o < 0.2 { 0.0 } else { 10f64.powf(-6.0 * v) })
+        .collect();
+    fine_stencil(&c, ny, nx, periodic).0
+}
+
+/// The dense matrix of a level's rows.
+fn dense(g: &impl Rows) -> Vec<Vec<f64>> {
+    let n = g.n();
+    let mut a = vec![vec![0.0; n]; n];
+    for (i, row) in a.iter_mut().enumerate() {
+        row[i] = g.diag(i);
+        for (j, w) in g.row(i) {
+            row[j as usize] -= w;
+        }
+    }
+    a
+}
+
+#[test]
+fn red_unknowns_are_independent_and_their_schur_complement_is_exact() {
+    // Odd and even widths, wrapped and walled, the 2-wide wrapped row: no face joins two red
+    // unknowns, and the stored S equals A_BB − A_BR D_R⁻¹ A_RB computed densely, to the
+    // single precision of its faces.
+    for (seed, ny, nx, periodic) in [
+        (1, 9, 7, true),
+        (2, 9, 7, false),
+        (3, 8, 6, true),
+        (4, 7, 2, true),
+        (5, 11, 9, true),
+    ] {
+        let st = holed(seed, ny, nx, periodic);
+        let (cells, index) = unknowns(&st);
+        let top = Fine {
+            st: &st,
+            cells: &cells,
+            index: &index,
+        };
+        let red = Reduction::new(&top);
+        let n = top.n();
+        let is_red = |i: usize| red.slot[i] == NONE;
+        for i in (0..n).filter(|&i| is_red(i)) {
+            for (j, _) in top.row(i) {
+                assert!(
+                    !is_red(j as usize),
+                    "red {i} and {j} share a face ({ny} × {nx})"
+                );
+            }
+        }
+        let a = dense(&top);
+        let s = red.schur(&top);
+        let got = dense(&s);
+        let kept = &red.kept;
+        for (p, &i) in kept.iter().enumerate() {
+            for (q, &j) in kept.iter().enumerate() {
+                let (i, j) = (i as usize, j as usize);
+                let mut want = a[i][j];
+                for r in (0..n).filter(|&r| is_red(r)) {
+                    want -= a[i][r] * a[r][j] / a[r][r];
+                }
+                let scale = a[i][i].abs().max(a[j][j].abs());
+                assert!(
+                    (got[p][q] - want).abs() <= 1e-6 * scale,
+                    "S[{p}][{q}] = {} against {want} ({ny} × {nx}, periodic {periodic})",
+                    got[p][q]
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn the_reduction_with_an_exact_coarse_solve_is_the_inverse() {
+    // 24 × 40 with closed cells: more unknowns than the dense factor takes, but S (half of
+    // them) is the coarsest level, so the preconditioner is A⁻¹ but for the single precision
+    // of S's faces.
+    let st = holed(9, 24, 40, true);
+    let n = st.active.iter().filter(|&&a| a).count();
+    assert!(n > COARSEST);
+    let mg = Multigrid::new(st);
+    assert_eq!(mg.n_levels(), 2, "sizes {:?}", mg.sizes());
+    let x: Vec<f64> = uniform(4, n).iter().map(|v| v - 0.5).collect();
+    let mut ax = vec![0.0; n];
+    mg.operator(&x, &mut ax);
+    let mut z = vec![0.0; n];
+    mg.precondition(&ax, &mut z);
+    let err = x
+        .iter()
+        .zip(&z)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0, f64::max);
+    assert!(err <= 1e-4, "largest error {err} of M⁻¹ A x against x");
+}

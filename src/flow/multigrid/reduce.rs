@@ -1,0 +1,189 @@
+//! Exact elimination of half the finest level: the red cells of a checkerboard.
+//!
+//! On the five-point stencil a cell's faces join it only to cells of the other colour of a
+//! checkerboard, so the red unknowns (row + column even) are mutually independent and
+//! eliminate exactly. Ordering them first,
+//!
+//! ```text
+//! A = [ D_R    −W_RB ]  = L [ D_R  0 ] Lᵀ,   L = [ I              0 ],
+//!     [ −W_BR   A_BB ]      [ 0    S ]           [ −W_BR D_R⁻¹    I ]
+//! S = A_BB − W_BR D_R⁻¹ W_RB,
+//! ```
+//!
+//! with `D_R` diagonal. The preconditioner is `A⁻¹` with `S⁻¹` replaced by one V-cycle on
+//! `S` (`M_S`), `B = L⁻ᵀ diag(D_R⁻¹, M_S) L⁻¹`: symmetric positive definite whenever `M_S`
+//! is, and `κ(B A) = κ(M_S S)`. Applied to `r`:
+//!
+//! ```text
+//! s_B = r_B + W_BR D_R⁻¹ r_R,   z_B = M_S s_B,   z_R = D_R⁻¹ (r_R + W_RB z_B),
+//! ```
+//!
+//! two passes with no dependence from row to row, in place of the Gauss–Seidel sweeps,
+//! residual and transfers of a classical first coarse level; and `S` is formed from the
+//! stencil directly instead of by a splitting, an interpolation and a Galerkin product.
+//! `S` is again an M-matrix in conductance form: the black unknowns `i`, `j` two cells apart
+//! are joined by `Σ_r w_ir w_rj / d_r` over their common red neighbours `r`, and the
+//! reservoir part of row `i` is `dir_i + Σ_r w_ir dir_r / d_r` (a sum of positive terms:
+//! the row sum of `S`, without cancellation). Its faces are stored in single precision like
+//! every coarse level's; the residuals stay those of the exact fine operator.
+//!
+//! A wrapped grid with an odd number of columns joins column `nx − 1` to column 0, both of
+//! the same parity: its last column is kept whole (black), so the red cells stay independent.
+
+use rayon::prelude::*;
+
+use super::cycle::Fine;
+use super::rows::Rows;
+use super::{concat, Graph, CHUNK, NONE};
+
+/// The red (eliminated) and black (kept) fine unknowns.
+pub(super) struct Reduction {
+    /// Fine unknown of each kept unknown, ascending.
+    pub(super) kept: Vec<u32>,
+    /// Kept index of each fine unknown; [`NONE`] for an eliminated one.
+    pub(super) slot: Vec<u32>,
+}
+
+/// Whether grid cell `k` of a `· × nx` grid is red.
+#[inline(always)]
+fn red(k: usize, nx: usize, periodic: bool) -> bool {
+    let (row, col) = (k / nx, k % nx);
+    (row + col) % 2 == 0 && !(periodic && nx % 2 == 1 && col == nx - 1)
+}
+
+impl Reduction {
+    /// The checkerboard of the finest level's unknowns.
+    pub(super) fn new(top: &Fine<'_>) -> Self {
+        let (nx, periodic) = (top.st.nx, top.st.periodic);
+        let is_red: Vec<bool> = top
+            .cells
+            .par_iter()
+            .with_min_len(CHUNK)
+            .map(|&k| red(k as usize, nx, periodic))
+            .collect();
+        let mut slot = vec![NONE; is_red.len()];
+        let mut kept = Vec::with_capacity(is_red.len() / 2 + 1);
+        for (i, &r) in is_red.iter().enumerate() {
+            if !r {
+                slot[i] = kept.len() as u32;
+                kept.push(i as u32);
+            }
+        }
+        Reduction { kept, slot }
+    }
+
+    /// Kept unknowns (the size of `S`).
+    pub(super) fn len(&self) -> usize {
+        self.kept.len()
+    }
+
+    /// Bytes held.
+    pub(super) fn bytes(&self) -> usize {
+        4 * (self.kept.len() + self.slot.len())
+    }
+
+    /// The Schur complement `S` on the kept unknowns, in conductance form (module docs).
+    pub(super) fn schur(&self, top: &Fine<'_>) -> Graph {
+        let ns = self.kept.len();
+        type Block = (Vec<usize>, Vec<u32>, Vec<f32>, Vec<f64>);
+        let blocks: Vec<Block> = (0..ns.div_ceil(CHUNK))
+            .into_par_iter()
+            .map(|blk| {
+                let rows = blk * CHUNK..((blk + 1) * CHUNK).min(ns);
+                let mut len = Vec::with_capacity(rows.len());
+                let mut col = Vec::new();
+                let mut w = Vec::new();
+                let mut dir = Vec::with_capacity(rows.len());
+                let mut acc: Vec<(u32, f64)> = Vec::with_capacity(16);
+                for s in rows {
+                    let i = self.kept[s] as usize;
+                    acc.clear();
+                    // Entries in the order first reached (fixed by the grid), summed there.
+                    let add = |acc: &mut Vec<(u32, f64)>, c: u32, v: f64| match acc
+                        .iter_mut()
+                        .find(|e| e.0 == c)
+                    {
+                        Some(e) => e.1 += v,
+                        None => acc.push((c, v)),
+                    };
+                    let mut res = top.reservoir(i);
+                    for (j, wij) in top.row(i) {
+                        let j = j as usize;
+                        if self.slot[j] != NONE {
+                            add(&mut acc, self.slot[j], wij);
+                            continue;
+                        }
+                        let dj = top.diag(j);
+                        res += wij * top.reservoir(j) / dj;
+                        for (m, wjm) in top.row(j) {
+                            if m as usize != i {
+                                add(&mut acc, self.slot[m as usize], wij * wjm / dj);
+                            }
+                        }
+                    }
+                    // Stored in single precision: a face that rounds to 0 is dropped.
+                    acc.retain(|e| e.1 as f32 != 0.0);
+                    acc.sort_unstable_by_key(|e| e.0);
+                    len.push(acc.len());
+                    for &(c, v) in acc.iter() {
+                        col.push(c);
+                        w.push(v as f32);
+                    }
+                    dir.push(res);
+                }
+                (len, col, w, dir)
+            })
+            .collect();
+        let mut dir = Vec::with_capacity(ns);
+        let blocks: Vec<(Vec<usize>, Vec<u32>, Vec<f32>)> = blocks
+            .into_iter()
+            .map(|(l, c, v, r)| {
+                dir.extend_from_slice(&r);
+                (l, c, v)
+            })
+            .collect();
+        let (ptr, col, w) = concat(blocks);
+        Graph::from_faces(ptr, col, w, dir)
+    }
+
+    /// `s = r_B + W_BR D_R⁻¹ r_R` on the kept unknowns.
+    pub(super) fn restrict(&self, top: &Fine<'_>, r: &[f64], s: &mut [f64]) {
+        s.par_chunks_mut(CHUNK).enumerate().for_each(|(blk, sc)| {
+            for (t, o) in sc.iter_mut().enumerate() {
+                let i = self.kept[blk * CHUNK + t] as usize;
+                let mut v = r[i];
+                top.st.for_each_face(top.cells[i] as usize, |l, c| {
+                    let j = top.index[l];
+                    if j != NONE && self.slot[j as usize] == NONE {
+                        v += c * r[j as usize] / top.st.d[l];
+                    }
+                });
+                *o = v;
+            }
+        });
+    }
+
+    /// `z_B = z_s`, `z_R = D_R⁻¹ (r_R + W_RB z_s)` on the fine unknowns.
+    pub(super) fn extend(&self, top: &Fine<'_>, r: &[f64], zs: &[f64], z: &mut [f64]) {
+        z.par_chunks_mut(CHUNK).enumerate().for_each(|(blk, zc)| {
+            for (t, o) in zc.iter_mut().enumerate() {
+                let i = blk * CHUNK + t;
+                let s = self.slot[i];
+                if s != NONE {
+                    *o = zs[s as usize];
+                    continue;
+                }
+                let k = top.cells[i] as usize;
+                let mut v = r[i];
+                // Every neighbour of a red unknown is kept.
+                top.st.for_each_face(k, |l, c| {
+                    let j = top.index[l];
+                    if j != NONE {
+                        v += c * zs[self.slot[j as usize] as usize];
+                    }
+                });
+                *o = v / top.st.d[k];
+            }
+        });
+    }
+}
