@@ -334,21 +334,39 @@ fn coarsen(g: &impl Rows) -> Option<(Interp, Graph)> {
     Some((ip, c))
 }
 
-/// Row blocks (row lengths, columns, values) concatenated in order into compressed rows.
-fn concat<T: Copy>(blocks: Vec<(Vec<usize>, Vec<u32>, Vec<T>)>) -> (Vec<usize>, Vec<u32>, Vec<T>) {
+/// Row blocks (row lengths, columns, values) concatenated in order into compressed rows,
+/// each block copied into its place in parallel.
+fn concat<T: Copy + Default + Send + Sync>(
+    blocks: Vec<(Vec<usize>, Vec<u32>, Vec<T>)>,
+) -> (Vec<usize>, Vec<u32>, Vec<T>) {
     let rows: usize = blocks.iter().map(|b| b.0.len()).sum();
     let nnz: usize = blocks.iter().map(|b| b.1.len()).sum();
-    let mut ptr = Vec::with_capacity(rows + 1);
-    let mut col = Vec::with_capacity(nnz);
-    let mut val = Vec::with_capacity(nnz);
-    ptr.push(0);
-    for (l, c, v) in blocks {
-        for len in l {
-            ptr.push(ptr.last().copied().unwrap_or(0) + len);
-        }
-        col.extend_from_slice(&c);
-        val.extend_from_slice(&v);
+    let mut ptr = vec![0usize; rows + 1];
+    let mut col = vec![0u32; nnz];
+    let mut val = vec![T::default(); nnz];
+    let mut parts = Vec::with_capacity(blocks.len());
+    let (mut p_rest, mut c_rest, mut v_rest) = (&mut ptr[1..], &mut col[..], &mut val[..]);
+    let mut start = 0;
+    for b in &blocks {
+        let (p, pr) = std::mem::take(&mut p_rest).split_at_mut(b.0.len());
+        let (c, cr) = std::mem::take(&mut c_rest).split_at_mut(b.1.len());
+        let (v, vr) = std::mem::take(&mut v_rest).split_at_mut(b.2.len());
+        (p_rest, c_rest, v_rest) = (pr, cr, vr);
+        parts.push((p, c, v, start));
+        start += b.1.len();
     }
+    parts
+        .into_par_iter()
+        .zip(blocks.par_iter())
+        .for_each(|((p, c, v, start), b)| {
+            c.copy_from_slice(&b.1);
+            v.copy_from_slice(&b.2);
+            let mut end = start;
+            for (e, &len) in p.iter_mut().zip(&b.0) {
+                end += len;
+                *e = end;
+            }
+        });
     (ptr, col, val)
 }
 

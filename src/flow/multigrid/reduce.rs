@@ -33,7 +33,6 @@
 use rayon::prelude::*;
 
 use super::cycle::Fine;
-use super::rows::Rows;
 use super::{concat, Graph, CHUNK, NONE};
 
 /// The red (eliminated) and black (kept) fine unknowns.
@@ -106,21 +105,29 @@ impl Reduction {
                         Some(e) => e.1 += v,
                         None => acc.push((c, v)),
                     };
-                    let mut res = top.reservoir(i);
-                    for (j, wij) in top.row(i) {
-                        let j = j as usize;
-                        if self.slot[j] != NONE {
-                            add(&mut acc, self.slot[j], wij);
-                            continue;
+                    let k = top.cells[i] as usize;
+                    let mut res = top.st.dir[k];
+                    // The stencil's faces directly (a 2-wide wrapped row's two faces to the
+                    // same neighbour come one by one; their sum is the same face).
+                    top.st.for_each_face(k, |l, wij| {
+                        let j = top.index[l];
+                        if j == NONE {
+                            return;
                         }
-                        let dj = top.diag(j);
-                        res += wij * top.reservoir(j) / dj;
-                        for (m, wjm) in top.row(j) {
-                            if m as usize != i {
+                        let sj = self.slot[j as usize];
+                        if sj != NONE {
+                            add(&mut acc, sj, wij);
+                            return;
+                        }
+                        let dj = top.st.d[l];
+                        res += wij * top.st.dir[l] / dj;
+                        top.st.for_each_face(l, |q, wjm| {
+                            let m = top.index[q];
+                            if m != NONE && m as usize != i {
                                 add(&mut acc, self.slot[m as usize], wij * wjm / dj);
                             }
-                        }
-                    }
+                        });
+                    });
                     // Stored in single precision: a face that rounds to 0 is dropped.
                     acc.retain(|e| e.1 as f32 != 0.0);
                     acc.sort_unstable_by_key(|e| e.0);
