@@ -170,15 +170,15 @@ impl Stencil {
         self.residual_of_parts(&[hi, lo], b, r);
     }
 
-    /// [`Stencil::residual_compensated`] on the unknowns only: unknown `i` is cell
-    /// `cells[i]`, `index` maps a cell to its unknown (`u32::MAX` without one, whose value
-    /// is 0), and `x`, `b`, `r` have one entry per unknown. Rows in fixed chunks of
-    /// `chunk` unknowns.
+    /// [`Stencil::residual_compensated`] on the unknowns only, of `x = Σ parts` (one part, or
+    /// a solution carried as two doubles `hi + lo`): unknown `i` is cell `cells[i]`, `index`
+    /// maps a cell to its unknown (`u32::MAX` without one, whose value is 0), and each part,
+    /// `b` and `r` have one entry per unknown. Rows in fixed chunks of `chunk` unknowns.
     pub fn residual_compensated_on(
         &self,
         cells: &[u32],
         index: &[u32],
-        x: &[f64],
+        parts: &[&[f64]],
         b: &[f64],
         r: &mut [f64],
         chunk: usize,
@@ -189,12 +189,18 @@ impl Stencil {
                 let i = i0 + t;
                 let k = cells[i] as usize;
                 let mut acc = Compensated::new(b[i]);
-                acc.add_product(-self.dir[k], x[i]);
+                for x in parts {
+                    acc.add_product(-self.dir[k], x[i]);
+                }
                 self.for_each_face(k, |l, c| {
-                    acc.add_product(-c, x[i]);
+                    for x in parts {
+                        acc.add_product(-c, x[i]);
+                    }
                     let j = index[l];
                     if j != u32::MAX {
-                        acc.add_product(c, x[j as usize]);
+                        for x in parts {
+                            acc.add_product(c, x[j as usize]);
+                        }
                     }
                 });
                 *rv = acc.value();
@@ -264,7 +270,7 @@ impl Compensated {
 
 /// `a + b = s + e` exactly (Knuth).
 #[inline(always)]
-fn two_sum(a: f64, b: f64) -> (f64, f64) {
+pub(super) fn two_sum(a: f64, b: f64) -> (f64, f64) {
     let s = a + b;
     let bb = s - a;
     (s, (a - (s - bb)) + (b - bb))

@@ -5,6 +5,7 @@ use std::time::Instant;
 
 use rayon::prelude::*;
 
+use super::assemble::two_sum;
 use crate::error::{Error, Result};
 
 /// Whether `LEAKPATH_FLOW_PROFILE` is set: stage timings of the flow solvers (the factor's
@@ -74,6 +75,9 @@ fn true_residual(residual: Residual<'_>, b: &[f64], x: &[f64], r: &mut [f64]) {
 /// `residual(x, b, r)` sets `r = b − A x` (e.g. summed exactly, so that it is not swamped by
 /// the rounding of `A x` where the conductances are large).
 pub type Residual<'a> = &'a dyn Fn(&[f64], &[f64], &mut [f64]);
+
+/// `r = b − A Σ parts` for a solution given in parts (`[x]` or `[hi, lo]`).
+pub type PartsResidual<'a> = &'a dyn Fn(&[&[f64]], &[f64], &mut [f64]);
 
 /// Solves `A x = b` from the initial guess in `x`, with preconditioner `precond(r, z)`,
 /// until the *true* residual `r = b − A x` (recomputed by `residual`) has `‖r‖₂ ≤ tol ‖b‖₂` and `measure(x, r) ≤ 1`
@@ -235,6 +239,10 @@ const REFINE_STEPS: usize = 8;
 /// conductances' rows), then the correction `A δ = r` by preconditioned CG from 0 to a
 /// relative residual [`INNER_TOL`] (in plain arithmetic: its rounding is relative to the
 /// correction, not to `x`), `x += δ`; until `‖r‖₂ ≤ tol ‖b‖₂` and `measure(x, r) ≤ 1`.
+/// With `lo`, the solution is carried as two doubles `x + lo` (zero `lo` to start): each
+/// correction is added without rounding error and the residual is that of `x + lo`
+/// (`exact` receives both parts), so `x + lo` keeps the digits below the last one of `x`
+/// (what `1 − x` needs where `x` is near 1).
 /// Each step gains the inner solve's factor on every part of the error, however far below
 /// the rounding of `A x` in the large rows it lies (a flow rate many decades below the
 /// conductances near the percolation threshold), where one long CG run stalls at that
@@ -245,11 +253,12 @@ const REFINE_STEPS: usize = 8;
 #[allow(clippy::too_many_arguments)]
 pub fn refined(
     apply: &dyn Fn(&[f64], &mut [f64]),
-    exact: Residual<'_>,
+    exact: PartsResidual<'_>,
     precond: &mut dyn FnMut(&[f64], &mut [f64]),
     measure: &dyn Fn(&[f64], &[f64]) -> f64,
     b: &[f64],
     x: &mut [f64],
+    mut lo: Option<&mut [f64]>,
     tol: f64,
     max_iter: usize,
     should_stop: Option<&(dyn Fn() -> bool + Sync)>,
@@ -278,7 +287,10 @@ pub fn refined(
     let mut step = 0;
     loop {
         let t0 = Instant::now();
-        exact(x, b, &mut r);
+        match lo.as_deref() {
+            Some(lo) => exact(&[x, lo], b, &mut r),
+            None => exact(&[x], b, &mut r),
+        }
         let rel = dot(&r, &r).sqrt() / bnorm;
         let m = measure(x, &r);
         if profiling() {
@@ -329,6 +341,22 @@ pub fn refined(
             should_stop,
         )?;
         it += inner.iterations;
-        axpy(1.0, &d, x);
+        match lo.as_deref_mut() {
+            Some(lo) => add_split(&d, x, lo),
+            None => axpy(1.0, &d, x),
+        }
     }
+}
+
+/// `hi + lo += d` element by element, the sum split again into a double and its rounding
+/// error ([`two_sum`]).
+fn add_split(d: &[f64], hi: &mut [f64], lo: &mut [f64]) {
+    hi.par_chunks_mut(CHUNK)
+        .zip(lo.par_chunks_mut(CHUNK))
+        .zip(d.par_chunks(CHUNK))
+        .for_each(|((hc, lc), dc)| {
+            for ((h, l), &dv) in hc.iter_mut().zip(lc.iter_mut()).zip(dc) {
+                (*h, *l) = two_sum(*h, *l + dv);
+            }
+        });
 }

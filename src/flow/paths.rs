@@ -305,7 +305,9 @@ pub(super) fn solve_multigrid(
         }
     }
     let mut x = vec![0.0; n];
-    let exact = |x: &[f64], b: &[f64], r: &mut [f64]| mg.residual_exact(x, b, r);
+    // φ carried as two doubles: `1 − φ` then keeps its digits where φ is near 1.
+    let mut lo = vec![0.0; n];
+    let exact = |x: &[&[f64]], b: &[f64], r: &mut [f64]| mg.residual_exact(x, b, r);
     let a = cg::refined(
         &apply,
         &exact,
@@ -313,6 +315,7 @@ pub(super) fn solve_multigrid(
         &accurate(mg, b_out, qtol),
         b_in,
         &mut x,
+        Some(&mut lo),
         opts.tol,
         max_iter,
         opts.should_stop,
@@ -325,8 +328,15 @@ pub(super) fn solve_multigrid(
     if !a.converged {
         return Ok(Err(failed(&a, "pressure")));
     }
-    // ψ from 1 − φ: only the digits that φ cannot hold near 1 are left to find.
-    let mut psi: Vec<f64> = x.par_iter().map(|&v| 1.0 - v).collect();
+    // ψ from 1 − φ with φ's low part, so that only ψ's own rounding and what φ's residual
+    // leaves of the inlet rate are to find. (ψ carried as two doubles too, from the exact
+    // complement, took more CG iterations on the 4097² gap: 11 against 7.)
+    let mut psi: Vec<f64> = x
+        .par_iter()
+        .zip(lo.par_iter())
+        .map(|(&v, &l)| (1.0 - v) - l)
+        .collect();
+    drop(lo);
     let b = cg::refined(
         &apply,
         &exact,
@@ -334,6 +344,7 @@ pub(super) fn solve_multigrid(
         &accurate(mg, b_in, qtol),
         b_out,
         &mut psi,
+        None,
         opts.tol,
         max_iter,
         opts.should_stop,

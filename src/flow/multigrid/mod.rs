@@ -577,11 +577,11 @@ impl Multigrid {
         top.product(x, y);
     }
 
-    /// `r = b − A x` on the unknowns, each row summed in double-double arithmetic
-    /// ([`Stencil::residual_compensated`]).
-    pub fn residual_exact(&self, x: &[f64], b: &[f64], r: &mut [f64]) {
+    /// `r = b − A Σ parts` on the unknowns (`x`, or `hi + lo`), each row summed in
+    /// double-double arithmetic ([`Stencil::residual_compensated`]).
+    pub fn residual_exact(&self, parts: &[&[f64]], b: &[f64], r: &mut [f64]) {
         self.fine
-            .residual_compensated_on(&self.cells, &self.index, x, b, r, CHUNK);
+            .residual_compensated_on(&self.cells, &self.index, parts, b, r, CHUNK);
     }
 
     /// `z = M⁻¹ r` on the unknowns: the red unknowns eliminated, one V-cycle from 0 on
