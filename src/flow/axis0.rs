@@ -22,8 +22,10 @@ pub(super) struct UnitSolution {
     pub(super) solver: &'static str,
 }
 
+/// `g`: the open gap (0 on closed cells), row-major `ny × nx`, taken over as the cells'
+/// conductances' buffer.
 pub(super) fn solve_axis0(
-    g: &[f64],
+    g: Vec<f64>,
     ny: usize,
     nx: usize,
     periodic: bool,
@@ -33,16 +35,16 @@ pub(super) fn solve_axis0(
     let n = ny * nx;
     let t_start = std::time::Instant::now();
     let gref = g.par_iter().cloned().reduce(|| 0.0, f64::max);
-    let mut c: Vec<f64> = if gref > 0.0 {
-        g.par_iter()
-            .map(|&v| {
-                let t = v / gref;
-                t * t * t
-            })
-            .collect()
+    // The conductances `(g / g_ref)³` in the gap's own buffer.
+    let mut c = g;
+    if gref > 0.0 {
+        c.par_iter_mut().for_each(|v| {
+            let t = *v / gref;
+            *v = t * t * t;
+        });
     } else {
-        vec![0.0; n]
-    };
+        c.iter_mut().for_each(|v| *v = 0.0);
+    }
     let open: Vec<bool> = c.par_iter().map(|&v| v > 0.0).collect();
     let per = Periodic {
         axis0: false,
@@ -80,18 +82,22 @@ pub(super) fn solve_axis0(
                 *cv = 0.0;
             }
         });
-    let n_unknowns = labels
-        .par_iter()
-        .filter(|&&l| touch[l as usize] == 3)
-        .count();
+    // Each cell's reservoirs (the touch flags of its cluster), in place of its label.
+    let class: Vec<u8> = labels.par_iter().map(|&l| touch[l as usize]).collect();
+    drop(labels);
+    let n_unknowns = class.par_iter().filter(|&&t| t == 3).count();
 
-    let (fine, rhs) = fine_stencil(&c, ny, nx, periodic);
+    let (fine, mut rhs) = fine_stencil(&c, ny, nx, periodic);
     // The outlet reservoir's share of the diagonal: `Q_out = b_out · φ`, and `ψ = 1 − φ` (the
     // flow reversed) solves `A ψ = b_out` with `Q_in = b_in · ψ`.
-    let b_out: Vec<f64> = (0..n)
+    let mut b_out: Vec<f64> = (0..n)
         .into_par_iter()
         .map(|k| if k >= (ny - 1) * nx { 2.0 * c[k] } else { 0.0 })
         .collect();
+    // Of the conductances only the inlet and outlet rows are read from here on (the
+    // reservoir fluxes).
+    let (c_in, c_out) = (c[..nx].to_vec(), c[(ny - 1) * nx..].to_vec());
+    drop(c);
     let max_iter = opts.max_iter.unwrap_or(DEFAULT_MAX_ITER);
     let prof = cg::profiling();
     if prof {
@@ -219,24 +225,27 @@ pub(super) fn solve_axis0(
         }
         let mg = Multigrid::new(fine);
         levels = mg.n_levels();
-        let (x, psi, residual, it) = solve_multigrid(&mg, &rhs, &b_out, opts, max_iter)??;
+        // The reservoirs' vectors on the unknowns; the cell-sized ones are not read again.
+        let (b_in, b_o) = (mg.gather(&rhs), mg.gather(&b_out));
+        (rhs, b_out) = (Vec::new(), Vec::new());
+        let (x, psi, residual, it) = solve_multigrid(&mg, b_in, b_o, opts, max_iter)??;
         iterations = it;
         (mg.into_fine(), x, psi, residual, "multigrid")
     };
-    drop(rhs);
+    drop((rhs, b_out));
     let t_post = std::time::Instant::now();
     let st = &st;
     // Pressures: solution on spanning cells, reservoir pressure on one-sided clusters.
     let phi: Vec<f64> = (0..n)
         .into_par_iter()
-        .map(|k| match touch[labels[k] as usize] {
+        .map(|k| match class[k] {
             3 => x[k],
             1 => 1.0,
             2 => 0.0,
             _ => f64::NAN,
         })
         .collect();
-    drop(labels);
+    drop(class);
     // A face flux `c_f (φ1 − φ2)` loses the digits of `φ` near 1 (all of the inlet side near
     // the percolation threshold, where the flow is many decades below the conductances):
     // there the same flux is `c_f (ψ2 − ψ1)` with `ψ = 1 − φ` solved for directly.
@@ -265,7 +274,7 @@ pub(super) fn solve_axis0(
     fa.par_chunks_mut(nx).enumerate().for_each(|(i, row)| {
         for j in 0..nx {
             row[j] = if i == 0 {
-                let cf = 2.0 * c[j];
+                let cf = 2.0 * c_in[j];
                 if cf > 0.0 {
                     cf * at(&psi, psilo, j)
                 } else {
@@ -273,7 +282,7 @@ pub(super) fn solve_axis0(
                 }
             } else if i == ny {
                 let k = (ny - 1) * nx + j;
-                let cf = 2.0 * c[k];
+                let cf = 2.0 * c_out[j];
                 if cf > 0.0 {
                     cf * at(&x, xlo, k)
                 } else {

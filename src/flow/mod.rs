@@ -360,8 +360,7 @@ pub fn solve_labelled(
         };
         (l, k)
     });
-    let unit = solve_axis0(&open_gap, ny, nx, pr.periodic, opts, given)?;
-    drop(open_gap);
+    let unit = solve_axis0(open_gap, ny, nx, pr.periodic, opts, given)?;
 
     // Dimensional scale: c = ĉ g_ref³ / (12 η), p = Δp φ, each factor kept as mantissa and
     // exponent so that the result is finite whenever it is representable (g_ref³ alone

@@ -268,18 +268,22 @@ pub(super) fn rate_error(x: &[f64], r: &[f64]) -> f64 {
 /// each until its relative residual is `≤ tol` and its flow rate is accurate to `tol`
 /// (estimated from the exact residual by [`rate_error`]); then the inlet and outlet rates must agree to [`FLUX_AGREEMENT`]. The
 /// inner `Err` is the failure to report (or to recover from with the direct solver).
+/// `b_in`, `b_out`: the reservoirs' vectors on the unknowns ([`Multigrid::gather`]); `φ` and
+/// `ψ` come back on the grid's cells. Each is held dense only while it is a right-hand side
+/// (as the other solve's rate weight it has only the inlet or outlet row's entries).
 type MultigridOk = (Vec<f64>, Vec<f64>, f64, usize);
 pub(super) fn solve_multigrid(
     mg: &Multigrid,
-    b_in: &[f64],
-    b_out: &[f64],
+    b_in: Vec<f64>,
+    b_out: Vec<f64>,
     opts: &Options<'_>,
     max_iter: usize,
 ) -> Result<std::result::Result<MultigridOk, Error>> {
     // Everything runs on the unknowns (the spanning cells), not the grid's cells.
     let qtol = opts.tol;
-    let (b_in, b_out) = (&mg.gather(b_in), &mg.gather(b_out));
     let n = b_in.len();
+    let out_rows = Sparse::of(&b_out);
+    drop(b_out);
     let apply = |v: &[f64], out: &mut [f64]| mg.operator(v, out);
     let mut pre = |r: &[f64], z: &mut [f64]| mg.precondition(r, z);
     // The rate's first-order error at most `tol` of it, and the pressure change a Jacobi step
@@ -287,7 +291,7 @@ pub(super) fn solve_multigrid(
     // small residual for a large pressure error).
     fn accurate<'a>(
         mg: &'a Multigrid,
-        w: &'a [f64],
+        w: &'a Sparse,
         qtol: f64,
     ) -> impl Fn(&[f64], &[f64]) -> f64 + 'a {
         move |x: &[f64], r: &[f64]| {
@@ -300,7 +304,7 @@ pub(super) fn solve_multigrid(
                     })
                 })
                 .reduce(|| 0.0, f64::max);
-            let rate = rate_error(x, r).abs() / (qtol * cg::dot(w, x).abs());
+            let rate = rate_error(x, r).abs() / (qtol * w.dot(x).abs());
             rate.max(jacobi / qtol)
         }
     }
@@ -312,8 +316,8 @@ pub(super) fn solve_multigrid(
         &apply,
         &exact,
         &mut pre,
-        &accurate(mg, b_out, qtol),
-        b_in,
+        &accurate(mg, &out_rows, qtol),
+        &b_in,
         &mut x,
         Some(&mut lo),
         opts.tol,
@@ -337,12 +341,15 @@ pub(super) fn solve_multigrid(
         .map(|(&v, &l)| (1.0 - v) - l)
         .collect();
     drop(lo);
+    let in_rows = Sparse::of(&b_in);
+    drop(b_in);
+    let b_out = out_rows.dense(n);
     let b = cg::refined(
         &apply,
         &exact,
         &mut pre,
-        &accurate(mg, b_in, qtol),
-        b_out,
+        &accurate(mg, &in_rows, qtol),
+        &b_out,
         &mut psi,
         None,
         opts.tol,
@@ -357,7 +364,7 @@ pub(super) fn solve_multigrid(
     if !b.converged {
         return Ok(Err(failed(&total, "reversed pressure")));
     }
-    let (q_out, q_in) = (cg::dot(b_out, &x), cg::dot(b_in, &psi));
+    let (q_out, q_in) = (out_rows.dot(&x), in_rows.dot(&psi));
     if !rates_agree(q_in, q_out) {
         return Ok(Err(failed(
             &total,
@@ -367,6 +374,35 @@ pub(super) fn solve_multigrid(
     let x = mg.scatter(&x);
     let psi = mg.scatter(&psi);
     Ok(Ok((x, psi, total.residual, total.iterations)))
+}
+
+/// The non-zero entries of a reservoir's vector (its row's cells only), in index order.
+struct Sparse(Vec<(u32, f64)>);
+
+impl Sparse {
+    fn of(v: &[f64]) -> Self {
+        Sparse(
+            v.iter()
+                .enumerate()
+                .filter(|e| *e.1 != 0.0)
+                .map(|(i, &w)| (i as u32, w))
+                .collect(),
+        )
+    }
+
+    /// `w · x`, summed in index order.
+    fn dot(&self, x: &[f64]) -> f64 {
+        self.0.iter().map(|&(i, w)| w * x[i as usize]).sum()
+    }
+
+    /// The dense vector of `n` entries.
+    fn dense(&self, n: usize) -> Vec<f64> {
+        let mut v = vec![0.0; n];
+        for &(i, w) in &self.0 {
+            v[i as usize] = w;
+        }
+        v
+    }
 }
 
 /// Bytes of a sparse Cholesky factor of `cells` unknowns (AMD on a 2-D grid: a few tens of
