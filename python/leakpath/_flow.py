@@ -298,7 +298,8 @@ def flow(
             elimination up to 2^20 unknowns), ``"multigrid"`` (conjugate gradients
             preconditioned by classical algebraic multigrid, refined on exact residuals
             until the residual, the rate's error and the Jacobi pressure change are below
-            ``tol``; memory linear in the grid), or ``"auto"`` (default: Cholesky whenever
+            ``tol``; memory linear in the grid), or ``"auto"`` (default: the multigrid from
+            2^22 unknowns (4097²-class gaps, where it is the faster); below, Cholesky whenever
             its factor, whose exact size is known after the symbolic analysis, fits in
             ``memory_limit`` and the available memory, skipping the analysis when even a
             lower bound of the factor (320 bytes per unknown) does not fit; multigrid

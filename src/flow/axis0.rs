@@ -22,6 +22,14 @@ pub(super) struct UnitSolution {
     pub(super) solver: &'static str,
 }
 
+/// Whether `Auto` takes the multigrid without trying the factor: from [`MULTIGRID_FROM`]
+/// unknowns, or when even the factor's lower bound does not fit in `room` bytes (its symbolic
+/// analysis, itself costly on large grids, is then skipped).
+pub(super) fn auto_skips_factor(n_unknowns: usize, room: Option<u64>) -> bool {
+    n_unknowns >= MULTIGRID_FROM
+        || room.is_some_and(|r| 16 * factor_entries_lower_bound(n_unknowns) > r)
+}
+
 /// `g`: the open gap (0 on closed cells), row-major `ny × nx`, taken over as the cells'
 /// conductances' buffer.
 pub(super) fn solve_axis0(
@@ -121,10 +129,7 @@ pub(super) fn solve_axis0(
     };
     // `Some(Ok)`: a factor; `Some(Err)`: the factor broke down (a non-positive pivot of the
     // rounded matrix); `None`: no factor (multigrid, or too large for `Auto`).
-    // `Auto` skips the symbolic analysis (itself costly on large grids) when even the
-    // factor's lower bound does not fit.
-    let hopeless = opts.solver == Solver::Auto
-        && factor_room.is_some_and(|r| 16 * factor_entries_lower_bound(n_unknowns) > r);
+    let hopeless = opts.solver == Solver::Auto && auto_skips_factor(n_unknowns, factor_room);
     let factor = if n_unknowns == 0 || opts.solver == Solver::Multigrid || hopeless {
         None
     } else {

@@ -65,6 +65,13 @@ pub use paths::{CONSERVATION_MAX, FLUX_AGREEMENT};
 /// Default relative residual `‖b − A x‖₂ / ‖b‖₂`.
 pub const DEFAULT_TOL: f64 = 1e-12;
 
+/// From this many unknowns `Auto` takes the multigrid without trying the factor: on the
+/// near-threshold gaps of benchmarks/results/flow_amg.md it is there the faster and needs a
+/// third of the memory (10.0 million unknowns at 4097²: 20.5 s and 2.6 GiB against the
+/// factor's 54.2 s and 9.0 GiB), while on 2049² gaps (2.3–2.7 million) either may be the
+/// faster (6.3 against 5.2 s, 5.4 against 9.5 s) and the factor is kept.
+pub const MULTIGRID_FROM: usize = 1 << 22;
+
 /// Default iteration cap. Gaps of contacts near the percolation threshold, whose
 /// conductances `g³` span 15 orders of magnitude at the contact edges, take thousands.
 pub const DEFAULT_MAX_ITER: usize = 20_000;
@@ -93,8 +100,9 @@ pub struct Problem<'a> {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Solver {
     /// Cholesky when its factor fits in memory (the symbolic analysis skipped when even a
-    /// lower bound of it does not), multigrid otherwise, and when the factor's answer fails
-    /// its checks on more unknowns than the cancellation-free elimination takes.
+    /// lower bound of it does not), multigrid otherwise, from [`MULTIGRID_FROM`] unknowns,
+    /// and when the factor's answer fails its checks on more unknowns than the
+    /// cancellation-free elimination takes.
     Auto,
     /// Sparse Cholesky ([`direct`]), refined with double-double residuals.
     Cholesky,

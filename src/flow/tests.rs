@@ -857,6 +857,18 @@ fn auto_uses_the_multigrid_when_the_factor_does_not_fit() {
     assert!(matches!(solve(&pr, &chol), Err(Error::TooLarge { .. })));
 }
 
+#[test]
+fn auto_skips_the_factor_from_multigrid_from_unknowns() {
+    // Ample room: the factor below the threshold, the multigrid from it.
+    let ample = Some(u64::MAX / 2);
+    assert!(!axis0::auto_skips_factor(MULTIGRID_FROM - 1, ample));
+    assert!(!axis0::auto_skips_factor(MULTIGRID_FROM - 1, None));
+    assert!(axis0::auto_skips_factor(MULTIGRID_FROM, ample));
+    assert!(axis0::auto_skips_factor(MULTIGRID_FROM, None));
+    // Few unknowns, but not even the factor's lower bound fits.
+    assert!(axis0::auto_skips_factor(1000, Some(1024)));
+}
+
 /// `order_of` orders every unknown of the stencil of conductances `c` exactly once.
 fn assert_orders_every_unknown(
     c: &[f64],
