@@ -3,7 +3,7 @@
 use rayon::prelude::*;
 
 use super::rows::Rows;
-use super::{concat, Graph, Interp, CHUNK, NONE};
+use super::{concat, Graph, Interp, RowBlock, CHUNK, NONE};
 
 /// Galerkin coarse operator `Pᵀ A P` in conductance form (module docs).
 pub(super) fn galerkin(g: &impl Rows, ip: &Interp, delta: &[f64], nc: usize) -> Graph {
@@ -22,7 +22,6 @@ pub(super) fn galerkin(g: &impl Rows, ip: &Interp, delta: &[f64], nc: usize) -> 
             v
         })
         .collect();
-    type Block = (Vec<usize>, Vec<u32>, Vec<f32>, Vec<f64>);
     // Each task's row accumulator: `slot[c]` is the position of coarse column `c` in the
     // row being built (NONE when absent); the row's entries keep the order of first touch,
     // so every sum is taken in an order fixed by the matrices, not by the threads.
@@ -30,7 +29,7 @@ pub(super) fn galerkin(g: &impl Rows, ip: &Interp, delta: &[f64], nc: usize) -> 
     // Few splits: each allocates an accumulator of the coarse size (rows are independent,
     // so the split does not change any value).
     let per = nblocks.div_ceil(4 * rayon::current_num_threads()).max(1);
-    let blocks: Vec<Block> = (0..nblocks)
+    let blocks: Vec<RowBlock> = (0..nblocks)
         .into_par_iter()
         .with_min_len(per)
         .map_init(
@@ -94,14 +93,6 @@ pub(super) fn galerkin(g: &impl Rows, ip: &Interp, delta: &[f64], nc: usize) -> 
             },
         )
         .collect();
-    let mut dir = Vec::with_capacity(nc);
-    let blocks: Vec<(Vec<usize>, Vec<u32>, Vec<f32>)> = blocks
-        .into_iter()
-        .map(|(l, c, v, r)| {
-            dir.extend_from_slice(&r);
-            (l, c, v)
-        })
-        .collect();
-    let (ptr, col, w) = concat(blocks);
+    let (ptr, col, w, dir) = concat(blocks);
     Graph::from_faces(ptr, col, w, dir)
 }

@@ -3,7 +3,7 @@
 use rayon::prelude::*;
 
 use super::rows::Rows;
-use super::{concat, strong, Interp, CHUNK, NONE};
+use super::{concat, strong, Interp, RowBlock, CHUNK, NONE};
 
 /// Classical interpolation (module docs) and the row-sum deficits `δ_i = dir_i / den`.
 pub(super) fn interpolation(
@@ -13,8 +13,7 @@ pub(super) fn interpolation(
     nc: usize,
 ) -> (Interp, Vec<f64>) {
     let n = g.n();
-    type Block = (Vec<usize>, Vec<u32>, Vec<f32>, Vec<f64>);
-    let blocks: Vec<Block> = (0..n.div_ceil(CHUNK))
+    let blocks: Vec<RowBlock> = (0..n.div_ceil(CHUNK))
         .into_par_iter()
         .map(|blk| {
             let rows = blk * CHUNK..((blk + 1) * CHUNK).min(n);
@@ -80,15 +79,7 @@ pub(super) fn interpolation(
             (len, col, val, delta)
         })
         .collect();
-    let mut deltas = Vec::with_capacity(n);
-    let blocks: Vec<(Vec<usize>, Vec<u32>, Vec<f32>)> = blocks
-        .into_iter()
-        .map(|(l, c, v, d)| {
-            deltas.extend_from_slice(&d);
-            (l, c, v)
-        })
-        .collect();
-    let (ptr, col, val) = concat(blocks);
+    let (ptr, col, val, deltas) = concat(blocks);
     // Transpose by counting (rows of each coarse column ascending).
     let mut tptr = vec![0usize; nc + 1];
     for &c in &col {

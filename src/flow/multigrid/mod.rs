@@ -334,40 +334,46 @@ fn coarsen(g: &impl Rows) -> Option<(Interp, Graph)> {
     Some((ip, c))
 }
 
-/// Row blocks (row lengths, columns, values) concatenated in order into compressed rows,
-/// each block copied into its place in parallel.
-fn concat<T: Copy + Default + Send + Sync>(
-    blocks: Vec<(Vec<usize>, Vec<u32>, Vec<T>)>,
-) -> (Vec<usize>, Vec<u32>, Vec<T>) {
+/// A block of consecutive rows built on its own: row lengths, columns, values, and one
+/// `f64` per row (a level's reservoir parts, an interpolation's row-sum deficits).
+type RowBlock = (Vec<usize>, Vec<u32>, Vec<f32>, Vec<f64>);
+
+/// Row blocks concatenated in order into compressed rows `(ptr, col, val)` and the per-row
+/// vector, each block copied into its place in parallel.
+fn concat(blocks: Vec<RowBlock>) -> (Vec<usize>, Vec<u32>, Vec<f32>, Vec<f64>) {
     let rows: usize = blocks.iter().map(|b| b.0.len()).sum();
     let nnz: usize = blocks.iter().map(|b| b.1.len()).sum();
     let mut ptr = vec![0usize; rows + 1];
     let mut col = vec![0u32; nnz];
-    let mut val = vec![T::default(); nnz];
+    let mut val = vec![0.0f32; nnz];
+    let mut side = vec![0.0f64; rows];
     let mut parts = Vec::with_capacity(blocks.len());
-    let (mut p_rest, mut c_rest, mut v_rest) = (&mut ptr[1..], &mut col[..], &mut val[..]);
+    let (mut p_rest, mut c_rest, mut v_rest, mut s_rest) =
+        (&mut ptr[1..], &mut col[..], &mut val[..], &mut side[..]);
     let mut start = 0;
     for b in &blocks {
         let (p, pr) = std::mem::take(&mut p_rest).split_at_mut(b.0.len());
         let (c, cr) = std::mem::take(&mut c_rest).split_at_mut(b.1.len());
         let (v, vr) = std::mem::take(&mut v_rest).split_at_mut(b.2.len());
-        (p_rest, c_rest, v_rest) = (pr, cr, vr);
-        parts.push((p, c, v, start));
+        let (r, rr) = std::mem::take(&mut s_rest).split_at_mut(b.3.len());
+        (p_rest, c_rest, v_rest, s_rest) = (pr, cr, vr, rr);
+        parts.push((p, c, v, r, start));
         start += b.1.len();
     }
     parts
         .into_par_iter()
         .zip(blocks.par_iter())
-        .for_each(|((p, c, v, start), b)| {
+        .for_each(|((p, c, v, r, start), b)| {
             c.copy_from_slice(&b.1);
             v.copy_from_slice(&b.2);
+            r.copy_from_slice(&b.3);
             let mut end = start;
             for (e, &len) in p.iter_mut().zip(&b.0) {
                 end += len;
                 *e = end;
             }
         });
-    (ptr, col, val)
+    (ptr, col, val, side)
 }
 
 impl Multigrid {

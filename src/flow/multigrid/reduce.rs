@@ -33,7 +33,7 @@
 use rayon::prelude::*;
 
 use super::cycle::Fine;
-use super::{concat, Graph, CHUNK, NONE};
+use super::{concat, Graph, RowBlock, CHUNK, NONE};
 
 /// The red (eliminated) and black (kept) fine unknowns.
 pub(super) struct Reduction {
@@ -84,8 +84,7 @@ impl Reduction {
     /// The Schur complement `S` on the kept unknowns, in conductance form (module docs).
     pub(super) fn schur(&self, top: &Fine<'_>) -> Graph {
         let ns = self.kept.len();
-        type Block = (Vec<usize>, Vec<u32>, Vec<f32>, Vec<f64>);
-        let blocks: Vec<Block> = (0..ns.div_ceil(CHUNK))
+        let blocks: Vec<RowBlock> = (0..ns.div_ceil(CHUNK))
             .into_par_iter()
             .map(|blk| {
                 let rows = blk * CHUNK..((blk + 1) * CHUNK).min(ns);
@@ -141,15 +140,7 @@ impl Reduction {
                 (len, col, w, dir)
             })
             .collect();
-        let mut dir = Vec::with_capacity(ns);
-        let blocks: Vec<(Vec<usize>, Vec<u32>, Vec<f32>)> = blocks
-            .into_iter()
-            .map(|(l, c, v, r)| {
-                dir.extend_from_slice(&r);
-                (l, c, v)
-            })
-            .collect();
-        let (ptr, col, w) = concat(blocks);
+        let (ptr, col, w, dir) = concat(blocks);
         Graph::from_faces(ptr, col, w, dir)
     }
 

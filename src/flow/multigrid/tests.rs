@@ -127,13 +127,7 @@ fn multigrid_memory_estimate_is_honest() {
     // Random fields with closed cells (a third) and six decades of conductance: the
     // hierarchy's bytes stay below the estimate, and the estimate within twice them.
     for (seed, ny, nx) in [(11, 300, 200), (12, 256, 256)] {
-        let u = uniform(seed, ny * nx);
-        let c: Vec<f64> = uniform(seed + 100, ny * nx)
-            .iter()
-            .zip(&u)
-            .map(|(&v, &o)| if o < 0.33 { 0.0 } else { 10f64.powf(-6.0 * v) })
-            .collect();
-        let st = fine_stencil(&c, ny, nx, true).0;
+        let st = holed(seed, ny, nx, true, 0.33);
         let m = st.active.iter().filter(|&&a| a).count();
         let mg = Multigrid::new(st);
         let (bytes, est) = (mg.bytes(), memory_estimate(m));
@@ -172,13 +166,19 @@ fn split_in_blocks_is_the_same_on_one_and_two_threads() {
     assert_eq!(run(1), run(2));
 }
 
-/// A stencil with a fifth of the cells closed and six decades of conductance.
-fn holed(seed: u64, ny: usize, nx: usize, periodic: bool) -> Stencil {
+/// A stencil with a share `closed` of the cells closed and six decades of conductance.
+fn holed(seed: u64, ny: usize, nx: usize, periodic: bool, closed: f64) -> Stencil {
     let u = uniform(seed, ny * nx);
-    let c: Vec<f64> = uniform(seed + 50, ny * nx)
+    let c: Vec<f64> = uniform(seed + 100, ny * nx)
         .iter()
         .zip(&u)
-        .map(|(&v, &o)| if o < 0.2 { 0.0 } else { 10f64.powf(-6.0 * v) })
+        .map(|(&v, &o)| {
+            if o < closed {
+                0.0
+            } else {
+                10f64.powf(-6.0 * v)
+            }
+        })
         .collect();
     fine_stencil(&c, ny, nx, periodic).0
 }
@@ -208,7 +208,7 @@ fn red_unknowns_are_independent_and_their_schur_complement_is_exact() {
         (4, 7, 2, true),
         (5, 11, 9, true),
     ] {
-        let st = holed(seed, ny, nx, periodic);
+        let st = holed(seed, ny, nx, periodic, 0.2);
         let (cells, index) = unknowns(&st);
         let top = Fine {
             st: &st,
@@ -253,7 +253,7 @@ fn the_reduction_with_an_exact_coarse_solve_is_the_inverse() {
     // 24 × 40 with closed cells: more unknowns than the dense factor takes, but S (half of
     // them) is the coarsest level, so the preconditioner is A⁻¹ but for the single precision
     // of S's faces.
-    let st = holed(9, 24, 40, true);
+    let st = holed(9, 24, 40, true, 0.2);
     let n = st.active.iter().filter(|&&a| a).count();
     assert!(n > COARSEST);
     let mg = Multigrid::new(st);
