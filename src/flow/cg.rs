@@ -287,9 +287,10 @@ pub fn refined(
     let mut step = 0;
     loop {
         let t0 = Instant::now();
+        // `lo` is zero until the first correction: the residual of `x` alone is the same.
         match lo.as_deref() {
-            Some(lo) => exact(&[x, lo], b, &mut r),
-            None => exact(&[x], b, &mut r),
+            Some(lo) if step > 0 => exact(&[x, lo], b, &mut r),
+            _ => exact(&[x], b, &mut r),
         }
         let rel = dot(&r, &r).sqrt() / bnorm;
         let m = measure(x, &r);
