@@ -308,6 +308,7 @@ pub(super) fn solve_multigrid(
             rate.max(jacobi / qtol)
         }
     }
+    let mut work = cg::Work::new(n);
     let mut x = vec![0.0; n];
     // φ carried as two doubles: `1 − φ` then keeps its digits where φ is near 1.
     let mut lo = vec![0.0; n];
@@ -323,6 +324,7 @@ pub(super) fn solve_multigrid(
         opts.tol,
         max_iter,
         opts.should_stop,
+        &mut work,
     )?;
     let failed = |o: &cg::Outcome, what: &str| Error::NotConverged {
         iterations: o.iterations,
@@ -335,12 +337,11 @@ pub(super) fn solve_multigrid(
     // ψ from 1 − φ with φ's low part, so that only ψ's own rounding and what φ's residual
     // leaves of the inlet rate are to find. (ψ carried as two doubles too, from the exact
     // complement, took more CG iterations on the 4097² gap: 11 against 7.)
-    let mut psi: Vec<f64> = x
-        .par_iter()
-        .zip(lo.par_iter())
-        .map(|(&v, &l)| (1.0 - v) - l)
-        .collect();
-    drop(lo);
+    // In `lo`'s place (one vector less at the peak).
+    let mut psi = lo;
+    psi.par_iter_mut()
+        .zip(x.par_iter())
+        .for_each(|(l, &v)| *l = (1.0 - v) - *l);
     let in_rows = Sparse::of(&b_in);
     drop(b_in);
     let b_out = out_rows.dense(n);
@@ -355,6 +356,7 @@ pub(super) fn solve_multigrid(
         opts.tol,
         max_iter,
         opts.should_stop,
+        &mut work,
     )?;
     let total = cg::Outcome {
         iterations: a.iterations + b.iterations,
@@ -371,6 +373,7 @@ pub(super) fn solve_multigrid(
             &format!("inlet rate {q_in:e} and outlet rate {q_out:e} differ"),
         )));
     }
+    drop(work);
     let x = mg.scatter(&x);
     let psi = mg.scatter(&psi);
     Ok(Ok((x, psi, total.residual, total.iterations)))
