@@ -109,8 +109,8 @@ def test_parallel_plates(shape, axis, periodic):
     ny, nx = shape
     W, L = (nx * dx, ny * dx) if axis == 0 else (ny * dx, nx * dx)
     exact = W * g**3 * dp / (12 * eta * L)
-    assert f.flow_rate == pytest.approx(exact, rel=1e-12)
-    assert f.inlet_flow_rate == pytest.approx(exact, rel=1e-12)
+    assert f.flow_rate == pytest.approx(exact, rel=1e-12, abs=0)
+    assert f.inlet_flow_rate == pytest.approx(exact, rel=1e-12, abs=0)
     assert f.permeability == pytest.approx(g**3 / 12, rel=1e-12)
     assert f.hydraulic_aperture == pytest.approx(g, rel=1e-12)
     assert f.conductance == pytest.approx(exact / dp, rel=1e-12)
@@ -123,7 +123,7 @@ def test_linear_gap_along_the_flow_is_series_conductances():
     f = leakpath.flow(gap, dx=1.0, viscosity=eta, pressure_drop=dp)
     c = gi**3 / (12 * eta)
     resistance = 1 / (2 * c[0]) + 1 / (2 * c[-1]) + np.sum((c[:-1] + c[1:]) / (2 * c[:-1] * c[1:]))
-    assert f.flow_rate == pytest.approx(nx * dp / resistance, rel=1e-12)
+    assert f.flow_rate == pytest.approx(nx * dp / resistance, rel=1e-12, abs=0)
     assert np.abs(f.flux_axis1).max() <= 1e-13 * f.flow_rate
     # Every cross-section carries Q.
     np.testing.assert_allclose(f.flux_axis0.sum(axis=1), f.flow_rate, rtol=1e-11)
@@ -167,7 +167,7 @@ def test_random_gap_matches_spsolve(seed, shape, closed, periodic, solver):
     )
     p, q = _reference(gap, gap <= 0, dp, eta, periodic)
     assert q > 0
-    assert f.flow_rate == pytest.approx(q, rel=1e-10)
+    assert f.flow_rate == pytest.approx(q, rel=1e-10, abs=0)
     spanning = ~np.isnan(p)
     np.testing.assert_allclose(f.pressure[spanning], p[spanning], rtol=0, atol=1e-10 * dp)
     assert abs(f.inlet_flow_rate - f.flow_rate) <= 1e-9 * f.flow_rate
@@ -188,7 +188,7 @@ def test_contact_gap_matches_spsolve(boundary, solver):
     if q == 0:
         assert f.flow_rate == 0.0
     else:
-        assert f.flow_rate == pytest.approx(q, rel=1e-10)
+        assert f.flow_rate == pytest.approx(q, rel=1e-10, abs=0)
         spanning = ~np.isnan(p)
         np.testing.assert_allclose(f.pressure[spanning], p[spanning], rtol=0, atol=1e-10 * 3.0)
     assert abs(f.inlet_flow_rate - f.flow_rate) <= 1e-9 * abs(f.flow_rate)
@@ -209,10 +209,10 @@ def test_pressure_drop_and_viscosity_scale_linearly():
     gap = _random_gap(8, (32, 32), 0.2)
     a = leakpath.flow(gap, dx=1.0)
     b = leakpath.flow(gap, dx=1.0, viscosity=4.0, pressure_drop=-2.0)
-    assert b.flow_rate == pytest.approx(-0.5 * a.flow_rate, rel=1e-12)
+    assert b.flow_rate == pytest.approx(-0.5 * a.flow_rate, rel=1e-12, abs=0)
     assert b.permeability == pytest.approx(a.permeability, rel=1e-12)
     z = leakpath.flow(gap, dx=1.0, pressure_drop=0.0)
-    assert z.flow_rate == 0.0 and z.conductance == pytest.approx(a.conductance, rel=1e-12)
+    assert z.flow_rate == 0.0 and z.conductance == pytest.approx(a.conductance, rel=1e-12, abs=0)
 
 
 @pytest.mark.parametrize("kwargs,argument", [
@@ -289,7 +289,7 @@ def test_cli_flow_json(capsys):
     s = leakpath.spectral(64, 0.8, seed=2, rms_height=1.0)
     st = leakpath.solve(s, 1.0, boundary="periodic", solver="polonsky-keer")
     f = st.flow(viscosity=2.0, pressure_drop=3.0)
-    assert out["flow_rate"] == pytest.approx(f.flow_rate, rel=1e-9)
+    assert out["flow_rate"] == pytest.approx(f.flow_rate, rel=1e-9, abs=0)
     assert out["contact_fraction"] == pytest.approx(st.contact_fraction)
     rc = main(["flow", "spectral:n=64,hurst=0.8,seed=2", "--approach", "1", "--viscosity", "0"])
     assert rc == 2
