@@ -63,12 +63,11 @@ pub struct Outcome {
 /// solve: allocated afresh for every inner solve, a 10-million-unknown grid faulted in and
 /// zeroed some 0.5 GB each time.
 pub struct Work {
-    /// The outer residual and the correction.
+    /// The outer residual (the inner solve's right-hand side, then its residual) and the
+    /// correction.
     r: Vec<f64>,
     d: Vec<f64>,
-    /// The inner solve's residual, preconditioned residual, search direction and its
-    /// product.
-    cg_r: Vec<f64>,
+    /// The inner solve's preconditioned residual, search direction and its product.
     z: Vec<f64>,
     p: Vec<f64>,
     q: Vec<f64>,
@@ -81,7 +80,6 @@ impl Work {
         Work {
             r: v(),
             d: v(),
-            cg_r: v(),
             z: v(),
             p: v(),
             q: v(),
@@ -106,22 +104,23 @@ pub type PartsResidual<'a> = &'a dyn Fn(&[&[f64]], &[f64], &mut [f64]);
 /// residual has `‖r‖₂ ≤ tol ‖b‖₂`: the inner solve of [`refined`], whose exact residual
 /// after the correction is the check (the recurrence drifts from `b − A x` in floating
 /// point; a correction short of `tol` only makes the next refinement step gain less).
-/// `converged` is false when `max_iter` is reached first, `residual` is the recurrence's.
-/// `b = 0` gives `x = 0`.
+/// `r` holds `b` on entry and the recurrence residual on return (the caller needs `b` no
+/// more: one vector less). `converged` is false when `max_iter` is reached first,
+/// `residual` is the recurrence's. `b = 0` gives `x = 0`.
 #[allow(clippy::too_many_arguments)]
 pub fn pcg(
     apply: &dyn Fn(&[f64], &mut [f64]),
     precond: &mut dyn FnMut(&[f64], &mut [f64]),
-    b: &[f64],
+    r: &mut [f64],
     x: &mut [f64],
     tol: f64,
     max_iter: usize,
     should_stop: Option<&(dyn Fn() -> bool + Sync)>,
     work: &mut Work,
 ) -> Result<Outcome> {
-    let n = b.len();
+    let n = r.len();
     x.par_iter_mut().for_each(|v| *v = 0.0);
-    let bnorm = dot(b, b).sqrt();
+    let bnorm = dot(r, r).sqrt();
     if bnorm == 0.0 {
         return Ok(Outcome {
             iterations: 0,
@@ -129,11 +128,8 @@ pub fn pcg(
             converged: true,
         });
     }
-    let Work {
-        cg_r: r, z, p, q, ..
-    } = work;
-    let (r, z, p, q) = (&mut r[..n], &mut z[..n], &mut p[..n], &mut q[..n]);
-    r.copy_from_slice(b);
+    let Work { z, p, q, .. } = work;
+    let (z, p, q) = (&mut z[..n], &mut p[..n], &mut q[..n]);
     let mut rnorm = bnorm;
     let mut it = 0;
     let mut rz = 0.0;
