@@ -39,10 +39,10 @@ def test_parallel_plates_against_the_analytic_gas_flow(axis):
     # Volume flow at the outlet density; the same conductance as the liquid's.
     assert f.flow_rate == pytest.approx(mdot * R_AIR * T / p_out, rel=1e-11, abs=0)
     liquid = leakpath.flow(np.full((ny, nx), g), dx=dx, axis=axis, viscosity=eta)
-    assert f.conductance == pytest.approx(liquid.conductance, rel=1e-12)
+    assert f.conductance == pytest.approx(liquid.conductance, rel=1e-12, abs=0)
     # The outlet faces carry the mass flow (mass fluxes).
     out = f.flux_axis0[-1, :] if axis == 0 else f.flux_axis1[:, -1]
-    assert out.sum() == pytest.approx(mdot, rel=1e-11)
+    assert out.sum() == pytest.approx(mdot, rel=1e-11, abs=0)
     assert f.pressure_drop == p_in - p_out
 
 
@@ -102,7 +102,7 @@ def test_cli_gas_flow_matches_the_api(capsys):
     # ṁ = C (p_in² − p_out²)/(2 R_s T) with the liquid conductance of the same gap.
     liquid = st.flow(viscosity=2.0)
     assert out["mass_flow_rate"] == pytest.approx(
-        liquid.conductance * (9.0 - 1.0) / (2 * 287.0 * 300.0), rel=1e-9
+        liquid.conductance * (9.0 - 1.0) / (2 * 287.0 * 300.0), rel=1e-9, abs=0
     )
     # Gas inputs without --gas, and --gas without them, are refused in one line.
     assert main(["flow", spec, "--approach", "1", "--temperature", "300"]) == 2

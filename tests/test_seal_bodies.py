@@ -175,13 +175,14 @@ def test_psd_and_integrals_against_closed_forms():
                                up + psd_rolloff(q, c0_l, q_r2, q_s2, 0.5), rtol=1e-12)
     m0 = 1e-12 + m0_rolloff(c0_l, q_r2, q_s2, 0.5)
     s2 = slope2_rolloff(c0, q_r, q_s, 0.8) + 0.02**2
-    assert composite_rms_height(UPPER, LOWER) == pytest.approx(math.sqrt(m0), rel=1e-12)
-    assert composite_rms_slope(UPPER, LOWER) == pytest.approx(math.sqrt(s2), rel=1e-12)
+    assert composite_rms_height(UPPER, LOWER) == pytest.approx(math.sqrt(m0), rel=1e-12, abs=0)
+    assert composite_rms_slope(UPPER, LOWER) == pytest.approx(math.sqrt(s2), rel=1e-12, abs=0)
     # and by quadrature of the returned C(q)
     c = composite_psd(UPPER, LOWER)
-    pts = sorted([q_r, q_r2, q_s2, q_s])
-    m0_quad = integrate.quad(lambda x: 2 * np.pi * x * c(x), 0, q_s, points=pts, limit=200)[0]
-    assert m0_quad == pytest.approx(m0, rel=1e-8)
+    # up to the larger cutoff (LOWER's, q_s2 > q_s): above it C(q) = 0
+    *pts, q_top = sorted([q_r, q_r2, q_s2, q_s])
+    m0_quad = integrate.quad(lambda x: 2 * np.pi * x * c(x), 0, q_top, points=pts, limit=200)[0]
+    assert m0_quad == pytest.approx(m0, rel=1e-8, abs=0)
 
 
 def test_tabulated_psd_and_no_rolloff():
@@ -194,10 +195,10 @@ def test_tabulated_psd_and_no_rolloff():
     np.testing.assert_allclose(composite_psd(tab, Roughness.smooth())(q),
                                psd_rolloff(q, 1e-20, q_r, q_s, h), rtol=1e-12)
     assert composite_rms_height(tab, Roughness.smooth()) == pytest.approx(
-        math.sqrt(m0_rolloff(1e-20, q_r, q_s, h)), rel=1e-12)
+        math.sqrt(m0_rolloff(1e-20, q_r, q_s, h)), rel=1e-12, abs=0)
     # rescaled table
     tab2 = Roughness(psd=table, rms_slope=0.1)
-    assert composite_rms_slope(tab2, tab2) == pytest.approx(0.1 * math.sqrt(2), rel=1e-12)
+    assert composite_rms_slope(tab2, tab2) == pytest.approx(0.1 * math.sqrt(2), rel=1e-12, abs=0)
 
     sa = Roughness(hurst=h, rms_height=2e-6, short_wavelength=1e-4)
     with pytest.raises(InvalidArgumentError) as e:
@@ -211,7 +212,7 @@ def test_tabulated_psd_and_no_rolloff():
                         / (2 * h))
     cq = composite_psd(sa, Roughness.smooth(), length=length)
     assert cq(np.array([q_l / 2]))[0] == 0.0
-    assert cq(np.array([2 * q_l]))[0] == pytest.approx(c0 * 2 ** (-2 * (1 + h)), rel=1e-12)
+    assert cq(np.array([2 * q_l]))[0] == pytest.approx(c0 * 2 ** (-2 * (1 + h)), rel=1e-12, abs=0)
 
 
 def _expected_discrete(psd, n, length):
@@ -254,7 +255,7 @@ def test_generated_rms_matches_request_statistically():
     assert abs(stats[:, 1].mean() - e_s2) < 4 * se_s2
     assert se_s2 / e_s2 < 0.03  # the slope is set by many modes: a tight check
     # the discrete expectation against the continuum (what the user asked for)
-    assert e_m0 == pytest.approx(composite_rms_height(upper, lower) ** 2, rel=0.06)
+    assert e_m0 == pytest.approx(composite_rms_height(upper, lower) ** 2, rel=0.06, abs=0)
     assert e_s2 == pytest.approx(composite_rms_slope(upper, lower) ** 2, rel=0.06)
     # realisations are distinct and uncorrelated
     a = composite_surface(upper, lower, patch, realisation=0, seed=2026).heights
@@ -289,7 +290,7 @@ def test_refine_is_the_same_realisation():
     patch = Patch(n=32, length=400e-6, dx=400e-6 / 32, rule="test")
     coarse = composite_surface(UPPER, LOWER, patch, realisation=4, seed=3)
     fine = composite_surface(UPPER, LOWER, patch, realisation=4, seed=3, refine=2)
-    assert fine.shape == (64, 64) and fine.dx == pytest.approx(patch.dx / 2, rel=1e-15)
+    assert fine.shape == (64, 64) and fine.dx == pytest.approx(patch.dx / 2, rel=1e-15, abs=0)
     scale = np.abs(coarse.heights).max()
     restricted = _band_limited_restriction(fine.heights, 32)
     np.testing.assert_allclose(restricted, coarse.heights, rtol=0, atol=1e-12 * scale)
@@ -345,7 +346,8 @@ def test_files_pair_realisation_by_realisation(tmp_path):
         composite_surface(lower, upper, patch, realisation=0, seed=0).heights)
     # statistics measured from the data
     m0 = np.mean((ups[0] - ups[0].mean()) ** 2) + np.mean((ups[1] - ups[1].mean()) ** 2)
-    assert composite_rms_height(upper, Roughness.smooth()) == pytest.approx(math.sqrt(m0 / 2))
+    rms = composite_rms_height(upper, Roughness.smooth())
+    assert rms == pytest.approx(math.sqrt(m0 / 2), abs=0)
     with pytest.raises(InvalidArgumentError) as e:
         composite_surface(upper, lower, patch, realisation=2, seed=0)
     assert e.value.argument == "realisation"
@@ -489,15 +491,15 @@ def test_measured_psd_of_a_spectral_surface(tmp_path):
     np.save(tmp_path / "s.npy", s.heights)
     body = Roughness(files=(str(tmp_path / "s.npy"),), dx=dx)
     flat = Roughness.smooth()
-    assert composite_rms_height(body, flat) == pytest.approx(1e-6, rel=1e-12)
-    assert composite_rms_slope(body, flat) == pytest.approx(leakpath.rms_slope(s), rel=1e-12)
+    assert composite_rms_height(body, flat) == pytest.approx(1e-6, rel=1e-12, abs=0)
+    assert composite_rms_slope(body, flat) == pytest.approx(leakpath.rms_slope(s), rel=1e-12, abs=0)
     c = composite_psd(body, flat)
     dq = 2 * np.pi / (n * dx)
     m0 = integrate.quad(lambda x: 2 * np.pi * x * c(x), 0, 2 * np.pi / (4 * dx),
                         points=dq * np.arange(1, 40), limit=400)[0]
     # Annulus-normalised bins integrate to m0; the log-log interpolation between the few
     # steep lowest bins (this spectrum has no roll-off: 4 modes carry most of m0) loses ~12 %.
-    assert m0 == pytest.approx(1e-12, rel=0.2)
+    assert m0 == pytest.approx(1e-12, rel=0.2, abs=0)
     band = np.geomspace(2 * np.pi / (n * dx) * 4, 2 * np.pi / (8 * dx) * 0.8, 20)
     exponent = np.polyfit(np.log(band), np.log(c(band)), 1)[0]
     assert exponent == pytest.approx(-2 * (1 + hurst), abs=0.25)

@@ -66,7 +66,7 @@ def test_persson_area_equals_the_stress_distribution_integrated_over_the_psd(hur
     got = persson_contact_fraction(p, e_star, slope)
     assert isinstance(got, float)
     assert got == pytest.approx(area, rel=1e-8)
-    assert got == pytest.approx(special.erf(1 / (2 * math.sqrt(g))), rel=1e-12)
+    assert got == pytest.approx(special.erf(1 / (2 * math.sqrt(g))), rel=1e-12, abs=0)
 
 
 def test_persson_small_load_constant_is_sqrt_8_over_pi():
@@ -156,7 +156,7 @@ def test_bruggeman_two_values_half_each_is_dykhnes_geometric_mean():
     g1, g2 = 1e-6, 7e-6
     gap = np.where(cells.reshape(64, 64), g1, g2)
     want = math.sqrt((g1**3 / 12) * (g2**3 / 12))
-    assert bruggeman_permeability(gap, 1e-5) == pytest.approx(want, rel=1e-13)
+    assert bruggeman_permeability(gap, 1e-5) == pytest.approx(want, rel=1e-13, abs=0)
 
 
 def test_bruggeman_is_zero_from_half_of_the_cells_closed():
@@ -169,10 +169,11 @@ def test_bruggeman_is_zero_from_half_of_the_cells_closed():
         g = g.reshape(40, 40)
         k = bruggeman_permeability(g, 1e-5)
         assert (k > 0) is positive
-        assert k == pytest.approx(_ema_root(g**3 / 12), rel=1e-12)
+        assert k == pytest.approx(_ema_root(g**3 / 12), rel=1e-12, abs=0)
         # The same cells closed through a contact mask (gaps there ignored).
         masked = np.where(g == 0, 5e-6, g)
-        assert bruggeman_permeability(masked, 1e-5, contact=g == 0) == pytest.approx(k, rel=1e-14)
+        k_masked = bruggeman_permeability(masked, 1e-5, contact=g == 0)
+        assert k_masked == pytest.approx(k, rel=1e-14, abs=0)
     # Fully closed.
     assert bruggeman_permeability(np.zeros((4, 4)), 1.0) == 0.0
 
@@ -183,7 +184,7 @@ def test_bruggeman_solves_the_effective_medium_condition(closed):
     gap = 1e-6 * np.exp(rng.normal(0, 1.0, (50, 50)))
     gap[rng.random(gap.shape) < closed] = -1e-9  # closed (g <= 0, no contact mask)
     k = bruggeman_permeability(gap, 1e-5)
-    assert k == pytest.approx(_ema_root(np.clip(gap, 0, None) ** 3 / 12), rel=1e-12)
+    assert k == pytest.approx(_ema_root(np.clip(gap, 0, None) ** 3 / 12), rel=1e-12, abs=0)
 
 
 @pytest.mark.parametrize("seed", [0, 1])
@@ -194,7 +195,7 @@ def test_bruggeman_between_wiener_bounds_and_near_the_finite_volume_flow(seed):
     ema = bruggeman_permeability(gap, 1e-5)
     assert stats.hmean(k.ravel()) < ema < k.mean()
     # Log-symmetric cells: the EMA is the geometric mean up to the sample's asymmetry.
-    assert ema == pytest.approx(stats.gmean(k.ravel()), rel=0.01)
+    assert ema == pytest.approx(stats.gmean(k.ravel()), rel=0.01, abs=0)
     for axis in (0, 1):
         fv = leakpath.flow(gap, dx=1e-5, axis=axis, periodic=True).permeability
         assert stats.hmean(k.ravel()) < fv < k.mean()
@@ -238,16 +239,16 @@ def test_estimate_of_a_log_symmetric_sample_is_its_geometric_mean():
     u = np.array([0.1, 0.7, 2.0, 3.5, 5.0])
     k = 3e-18 * np.exp(np.concatenate([u, -u, [0.0]]))
     est = effective_permeability(k)
-    assert est.value == pytest.approx(3e-18, rel=1e-12)
-    assert est.geometric == pytest.approx(stats.gmean(k), rel=1e-12)
-    assert est.value == pytest.approx(est.geometric, rel=1e-12)
+    assert est.value == pytest.approx(3e-18, rel=1e-12, abs=0)
+    assert est.geometric == pytest.approx(stats.gmean(k), rel=1e-12, abs=0)
+    assert est.value == pytest.approx(est.geometric, rel=1e-12, abs=0)
 
 
 def test_estimate_of_lognormal_samples_is_close_to_the_geometric_mean():
     k = 1e-17 * np.exp(np.random.default_rng(7).normal(0, 2.0, 1000))
     est = effective_permeability(k)
-    assert est.value == pytest.approx(stats.gmean(k), rel=0.05)
-    assert est.value == pytest.approx(1e-17, rel=0.25)  # the population's geometric mean
+    assert est.value == pytest.approx(stats.gmean(k), rel=0.05, abs=0)
+    assert est.value == pytest.approx(1e-17, rel=0.25, abs=0)  # the population's geometric mean
 
 
 @pytest.mark.parametrize("seed", range(5))
@@ -256,12 +257,12 @@ def test_estimate_ordering_and_means_against_scipy(seed):
     k = 1e-18 * rng.gamma(0.5 + seed, size=12)
     est = effective_permeability(k)
     assert isinstance(est, PermeabilityEstimate)
-    assert est.arithmetic == pytest.approx(np.mean(k), rel=1e-14)
-    assert est.harmonic == pytest.approx(stats.hmean(k), rel=1e-12)
-    assert est.geometric == pytest.approx(stats.gmean(k), rel=1e-12)
+    assert est.arithmetic == pytest.approx(np.mean(k), rel=1e-14, abs=0)
+    assert est.harmonic == pytest.approx(stats.hmean(k), rel=1e-12, abs=0)
+    assert est.geometric == pytest.approx(stats.gmean(k), rel=1e-12, abs=0)
     assert est.harmonic <= est.geometric <= est.arithmetic
     assert est.harmonic <= est.value <= est.arithmetic
-    assert est.value == pytest.approx(_ema_root(k), rel=1e-12)
+    assert est.value == pytest.approx(_ema_root(k), rel=1e-12, abs=0)
     assert est.low <= est.value <= est.high
     assert (est.n, est.n_leaking, est.leak_fraction) == (12, 12, 1.0)
     assert "bruggeman" in est.method and str(BOOTSTRAP_RESAMPLES) in est.method
@@ -271,7 +272,7 @@ def test_estimate_with_closed_patches():
     k = np.array([0.0, 0.0, 0.0, 1e-18, 4e-18, 2e-18, 9e-18])
     est = effective_permeability(k)
     assert est.harmonic == 0.0 and est.geometric == 0.0
-    assert est.value == pytest.approx(_ema_root(k), rel=1e-12) and est.value > 0
+    assert est.value == pytest.approx(_ema_root(k), rel=1e-12, abs=0) and est.value > 0
     assert est.leak_fraction == pytest.approx(4 / 7) and est.n_leaking == 4
     # Half or more closed: the 2-D effective-medium threshold.
     half = effective_permeability(np.array([0.0, 0.0, 1e-18, 5e-18]))
@@ -287,9 +288,9 @@ def test_estimate_over_three_hundred_decades():
     # 2(ε − K)/(ε + K) + (1 − K)/(1 + K) = 0 has K = 3ε (1 + O(ε)): no underflow on the way.
     k = np.array([1e-300, 1e-300, 1.0])
     est = effective_permeability(k)
-    assert est.value == pytest.approx(3e-300, rel=1e-12)
-    assert est.harmonic == pytest.approx(1.5e-300, rel=1e-12)
-    assert est.geometric == pytest.approx(1e-200, rel=1e-12)
+    assert est.value == pytest.approx(3e-300, rel=1e-12, abs=0)
+    assert est.harmonic == pytest.approx(1.5e-300, rel=1e-12, abs=0)
+    assert est.geometric == pytest.approx(1e-200, rel=1e-12, abs=0)
     assert 0 < est.low <= est.value <= est.high <= 1.0
 
 
@@ -316,9 +317,9 @@ def test_groups_resample_whole_realisations():
     # Each realisation twice (two flow directions with the same k): resampling whole groups
     # draws the same realisations as resampling the singles.
     paired = effective_permeability(np.repeat(k, 2), seed=3, groups=np.repeat(np.arange(10), 2))
-    assert paired.value == pytest.approx(single.value, rel=1e-12)
-    assert paired.low == pytest.approx(single.low, rel=1e-12)
-    assert paired.high == pytest.approx(single.high, rel=1e-12)
+    assert paired.value == pytest.approx(single.value, rel=1e-12, abs=0)
+    assert paired.low == pytest.approx(single.low, rel=1e-12, abs=0)
+    assert paired.high == pytest.approx(single.high, rel=1e-12, abs=0)
     # Treated as 20 independent values the interval would be narrower.
     naive = effective_permeability(np.repeat(k, 2), seed=3)
     assert naive.high / naive.low < paired.high / paired.low
@@ -343,7 +344,7 @@ def test_interval_covers_the_true_effective_permeability(sigma, closed):
     # 16 values covers somewhat less than nominal).
     true = 1e-18 * _population_root(sigma, closed)
     if closed == 0:
-        assert true == pytest.approx(1e-18, rel=1e-9)  # log-symmetric: the median
+        assert true == pytest.approx(1e-18, rel=1e-9, abs=0)  # log-symmetric: the median
     hits = 0
     for experiment in range(200):
         rng = np.random.default_rng(10_000 + experiment)
@@ -390,7 +391,7 @@ def test_liquid_leak_rate_matches_the_flow_solver_on_parallel_plates(axis):
         g**3 / 12, width=n_across * dx, length=n_along * dx, viscosity=eta, pressure_drop=dp
     )
     assert q == pytest.approx(f.flow_rate, rel=1e-11, abs=0)
-    assert q == pytest.approx(n_across * g**3 * dp / (12 * eta * n_along), rel=1e-14)
+    assert q == pytest.approx(n_across * g**3 * dp / (12 * eta * n_along), rel=1e-14, abs=0)
 
 
 @pytest.mark.parametrize("axis", [0, 1])
@@ -408,7 +409,7 @@ def test_gas_mass_flow_matches_the_flow_solver_on_parallel_plates(axis):
     )
     assert m == pytest.approx(f.mass_flow_rate, rel=1e-11, abs=0)
     assert m == pytest.approx(
-        n_across * g**3 * (p_in**2 - p_out**2) / (24 * eta * R_AIR * t * n_along), rel=1e-14
+        n_across * g**3 * (p_in**2 - p_out**2) / (24 * eta * R_AIR * t * n_along), rel=1e-14, abs=0
     )
 
 
@@ -417,7 +418,7 @@ def test_leak_rates_broadcast_and_pass_nan_through():
         np.array([1e-18, math.nan, 0.0]), width=0.1, length=2e-3, viscosity=1e-3,
         pressure_drop=1e5,
     )
-    assert q[0] == pytest.approx(1e-18 * 50 * 1e8, rel=1e-14)
+    assert q[0] == pytest.approx(1e-18 * 50 * 1e8, rel=1e-14, abs=0)
     assert math.isnan(q[1]) and q[2] == 0.0
 
 

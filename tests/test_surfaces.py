@@ -90,10 +90,10 @@ class TestSurface:
         s = Surface(h, 0.5, {"a": 1})
         assert s.shape == (3, 4)
         assert s.length == (1.5, 2.0)
-        assert s.nominal_area == pytest.approx(3 * 4 * 0.25, rel=1e-15)
-        assert s.height_range == pytest.approx(h.max() - h.min(), rel=1e-15)
-        assert s.rms_height == pytest.approx(np.std(h), rel=1e-14)
-        assert s.mean_height == pytest.approx(h.mean(), rel=1e-15)
+        assert s.nominal_area == pytest.approx(3 * 4 * 0.25, rel=1e-15, abs=0)
+        assert s.height_range == pytest.approx(h.max() - h.min(), rel=1e-15, abs=0)
+        assert s.rms_height == pytest.approx(np.std(h), rel=1e-14, abs=0)
+        assert s.mean_height == pytest.approx(h.mean(), rel=1e-15, abs=0)
         assert s.heights.dtype == np.float64 and s.heights.flags.c_contiguous
 
     def test_integer_heights_converted(self):
