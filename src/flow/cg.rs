@@ -67,7 +67,11 @@ pub struct Work {
     /// correction.
     r: Vec<f64>,
     d: Vec<f64>,
-    /// The inner solve's preconditioned residual, search direction and its product.
+    inner: Inner,
+}
+
+/// The inner solve's preconditioned residual, search direction and its product.
+struct Inner {
     z: Vec<f64>,
     p: Vec<f64>,
     q: Vec<f64>,
@@ -80,9 +84,11 @@ impl Work {
         Work {
             r: v(),
             d: v(),
-            z: v(),
-            p: v(),
-            q: v(),
+            inner: Inner {
+                z: v(),
+                p: v(),
+                q: v(),
+            },
         }
     }
 }
@@ -108,7 +114,7 @@ pub type PartsResidual<'a> = &'a dyn Fn(&[&[f64]], &[f64], &mut [f64]);
 /// more: one vector less). `converged` is false when `max_iter` is reached first,
 /// `residual` is the recurrence's. `b = 0` gives `x = 0`.
 #[allow(clippy::too_many_arguments)]
-pub fn pcg(
+fn pcg(
     apply: &dyn Fn(&[f64], &mut [f64]),
     precond: &mut dyn FnMut(&[f64], &mut [f64]),
     r: &mut [f64],
@@ -116,7 +122,7 @@ pub fn pcg(
     tol: f64,
     max_iter: usize,
     should_stop: Option<&(dyn Fn() -> bool + Sync)>,
-    work: &mut Work,
+    work: &mut Inner,
 ) -> Result<Outcome> {
     let n = r.len();
     x.par_iter_mut().for_each(|v| *v = 0.0);
@@ -128,7 +134,7 @@ pub fn pcg(
             converged: true,
         });
     }
-    let Work { z, p, q, .. } = work;
+    let Inner { z, p, q } = work;
     let (z, p, q) = (&mut z[..n], &mut p[..n], &mut q[..n]);
     let mut rnorm = bnorm;
     let mut it = 0;
@@ -233,7 +239,7 @@ pub fn refined(
     measure: &dyn Fn(&[f64], &[f64]) -> f64,
     b: &[f64],
     x: &mut [f64],
-    lo: Option<&mut [f64]>,
+    mut lo: Option<&mut [f64]>,
     tol: f64,
     max_iter: usize,
     should_stop: Option<&(dyn Fn() -> bool + Sync)>,
@@ -249,45 +255,8 @@ pub fn refined(
             converged: true,
         });
     }
-    // The outer vectors out of `work` for the loop (no copy), put back after.
-    let mut r = std::mem::take(&mut work.r);
-    let mut d = std::mem::take(&mut work.d);
-    let out = refine_loop(
-        apply,
-        exact,
-        precond,
-        measure,
-        b,
-        x,
-        lo,
-        tol,
-        max_iter,
-        should_stop,
-        (&mut r[..n], &mut d[..n]),
-        work,
-    );
-    work.r = r;
-    work.d = d;
-    out
-}
-
-/// The loop of [`refined`] with its residual `r` and correction `d`.
-#[allow(clippy::too_many_arguments)]
-fn refine_loop(
-    apply: &dyn Fn(&[f64], &mut [f64]),
-    exact: PartsResidual<'_>,
-    precond: &mut dyn FnMut(&[f64], &mut [f64]),
-    measure: &dyn Fn(&[f64], &[f64]) -> f64,
-    b: &[f64],
-    x: &mut [f64],
-    mut lo: Option<&mut [f64]>,
-    tol: f64,
-    max_iter: usize,
-    should_stop: Option<&(dyn Fn() -> bool + Sync)>,
-    (r, d): (&mut [f64], &mut [f64]),
-    work: &mut Work,
-) -> Result<Outcome> {
-    let bnorm = dot(b, b).sqrt();
+    let Work { r, d, inner } = work;
+    let (r, d) = (&mut r[..n], &mut d[..n]);
     let mut it = 0;
     let mut last = f64::INFINITY;
     let mut last_rel = f64::INFINITY;
@@ -346,7 +315,7 @@ fn refine_loop(
             INNER_TOL,
             max_iter - it,
             should_stop,
-            work,
+            inner,
         )?;
         it += inner.iterations;
         match lo.as_deref_mut() {
