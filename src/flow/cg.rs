@@ -59,36 +59,40 @@ pub struct Outcome {
     pub converged: bool,
 }
 
-/// The vectors of [`refined`] and of its inner [`pcg`] solves, allocated once for a whole
-/// solve: allocated afresh for every inner solve, a 10-million-unknown grid faulted in and
-/// zeroed some 0.5 GB each time.
+/// The vectors of [`refined`], allocated once for a whole solve (like [`Inner`]'s):
+/// allocated afresh for every step, a 10-million-unknown grid faulted in and zeroed some
+/// 0.5 GB each time.
 pub struct Work {
-    /// The outer residual (the inner solve's right-hand side, then its residual) and the
-    /// correction.
+    /// The residual (the inner solve's right-hand side) and the correction.
     r: Vec<f64>,
     d: Vec<f64>,
-    inner: Inner,
-}
-
-/// The inner solve's preconditioned residual, search direction and its product.
-struct Inner {
-    z: Vec<f64>,
-    p: Vec<f64>,
-    q: Vec<f64>,
 }
 
 impl Work {
     /// The vectors for systems of `n` unknowns.
     pub fn new(n: usize) -> Self {
-        let v = || vec![0.0; n];
         Work {
-            r: v(),
-            d: v(),
-            inner: Inner {
-                z: v(),
-                p: v(),
-                q: v(),
-            },
+            r: vec![0.0; n],
+            d: vec![0.0; n],
+        }
+    }
+}
+
+/// The vectors of [`pcg`] besides its residual and solution: the preconditioned residual,
+/// the search direction and its product.
+pub struct Inner {
+    z: Vec<f64>,
+    p: Vec<f64>,
+    q: Vec<f64>,
+}
+
+impl Inner {
+    /// The vectors for systems of `n` unknowns.
+    pub fn new(n: usize) -> Self {
+        Inner {
+            z: vec![0.0; n],
+            p: vec![0.0; n],
+            q: vec![0.0; n],
         }
     }
 }
@@ -107,15 +111,16 @@ const STALL_ACCEPT: f64 = 1e3;
 pub type PartsResidual<'a> = &'a dyn Fn(&[&[f64]], &[f64], &mut [f64]);
 
 /// Solves `A x = b` from `x = 0` with preconditioner `precond(r, z)` until the recurrence
-/// residual has `‖r‖₂ ≤ tol ‖b‖₂`: the inner solve of [`refined`], whose exact residual
-/// after the correction is the check (the recurrence drifts from `b − A x` in floating
-/// point; a correction short of `tol` only makes the next refinement step gain less).
+/// residual has `‖r‖₂ ≤ tol ‖b‖₂`: the inner solve of [`refined`] (on the fine system or on
+/// a reduced one), whose exact residual after the correction is the check (the recurrence
+/// drifts from `b − A x` in floating point; a correction short of `tol` only makes the next
+/// refinement step gain less).
 /// `r` holds `b` on entry and the recurrence residual on return (the caller needs `b` no
 /// more: one vector less). `converged` is false when `max_iter` is reached first,
 /// `residual` is the recurrence's. `b = 0` gives `x = 0`.
 #[allow(clippy::too_many_arguments)]
-fn pcg(
-    apply: &dyn Fn(&[f64], &mut [f64]),
+pub fn pcg(
+    apply: &mut dyn FnMut(&[f64], &mut [f64]),
     precond: &mut dyn FnMut(&[f64], &mut [f64]),
     r: &mut [f64],
     x: &mut [f64],
@@ -215,11 +220,17 @@ const FLOOR_ACCEPT: f64 = 1e2;
 /// Refinement steps at most in [`refined`].
 const REFINE_STEPS: usize = 8;
 
-/// Iterative refinement around [`pcg`]: from `x`, repeatedly the residual `r = b − A x`
-/// recomputed by `exact` (summed exactly: not swamped by the rounding of the large
-/// conductances' rows), then the correction `A δ = r` by preconditioned CG from 0 to a
-/// relative residual [`INNER_TOL`] (in plain arithmetic: its rounding is relative to the
-/// correction, not to `x`), `x += δ`; until `‖r‖₂ ≤ tol ‖b‖₂` and `measure(x, r) ≤ 1`.
+/// The inner solve of [`refined`]: `correct(r, δ, max_iter)` sets `δ` to an approximate
+/// solution of `A δ = r` (preconditioned CG from 0 to a relative residual [`INNER_TOL`] in
+/// plain arithmetic, on `A` or on a reduced system; `r` may be overwritten) within
+/// `max_iter` iterations.
+pub type Correct<'a> = &'a mut dyn FnMut(&mut [f64], &mut [f64], usize) -> Result<Outcome>;
+
+/// Iterative refinement around an inner solve ([`pcg`] through `correct`): from `x`,
+/// repeatedly the residual `r = b − A x` recomputed by `exact` (summed exactly: not swamped
+/// by the rounding of the large conductances' rows), then the correction `A δ = r` by
+/// `correct` (in plain arithmetic: its rounding is relative to the correction, not to `x`),
+/// `x += δ`; until `‖r‖₂ ≤ tol ‖b‖₂` and `measure(x, r) ≤ 1`.
 /// With `lo`, the solution is carried as two doubles `x + lo` (zero `lo` to start): each
 /// correction is added without rounding error and the residual is that of `x + lo`
 /// (`exact` receives both parts), so `x + lo` keeps the digits below the last one of `x`
@@ -233,16 +244,14 @@ const REFINE_STEPS: usize = 8;
 /// measure up to [`FLOOR_ACCEPT`] accepted.
 #[allow(clippy::too_many_arguments)]
 pub fn refined(
-    apply: &dyn Fn(&[f64], &mut [f64]),
     exact: PartsResidual<'_>,
-    precond: &mut dyn FnMut(&[f64], &mut [f64]),
+    correct: Correct<'_>,
     measure: &dyn Fn(&[f64], &[f64]) -> f64,
     b: &[f64],
     x: &mut [f64],
     mut lo: Option<&mut [f64]>,
     tol: f64,
     max_iter: usize,
-    should_stop: Option<&(dyn Fn() -> bool + Sync)>,
     work: &mut Work,
 ) -> Result<Outcome> {
     let n = b.len();
@@ -255,7 +264,7 @@ pub fn refined(
             converged: true,
         });
     }
-    let Work { r, d, inner } = work;
+    let Work { r, d } = work;
     let (r, d) = (&mut r[..n], &mut d[..n]);
     let mut it = 0;
     let mut last = f64::INFINITY;
@@ -307,17 +316,7 @@ pub fn refined(
         last = m;
         last_rel = rel;
         step += 1;
-        let inner = pcg(
-            apply,
-            precond,
-            r,
-            d,
-            INNER_TOL,
-            max_iter - it,
-            should_stop,
-            inner,
-        )?;
-        it += inner.iterations;
+        it += correct(r, d, max_iter - it)?.iterations;
         match lo.as_deref_mut() {
             Some(lo) => add_split(d, x, lo),
             None => axpy(1.0, d, x),

@@ -284,8 +284,6 @@ pub(super) fn solve_multigrid(
     let n = b_in.len();
     let out_rows = Sparse::of(&b_out);
     drop(b_out);
-    let apply = |v: &[f64], out: &mut [f64]| mg.operator(v, out);
-    let mut pre = |r: &[f64], z: &mut [f64]| mg.precondition(r, z);
     // The rate's first-order error at most `tol` of it, and the pressure change a Jacobi step
     // would make, `max |r_k| / d_k`, at most `tol` (a dead end behind a narrow face has a
     // small residual for a large pressure error).
@@ -309,21 +307,22 @@ pub(super) fn solve_multigrid(
         }
     }
     let mut work = cg::Work::new(n);
+    let mut correction = Correction::new(mg, opts.should_stop);
+    let mut correct =
+        |r: &mut [f64], d: &mut [f64], max_iter: usize| correction.correct(r, d, max_iter);
     let mut x = vec![0.0; n];
     // φ carried as two doubles: `1 − φ` then keeps its digits where φ is near 1.
     let mut lo = vec![0.0; n];
     let exact = |x: &[&[f64]], b: &[f64], r: &mut [f64]| mg.residual_exact(x, b, r);
     let a = cg::refined(
-        &apply,
         &exact,
-        &mut pre,
+        &mut correct,
         &accurate(mg, &out_rows, qtol),
         &b_in,
         &mut x,
         Some(&mut lo),
         opts.tol,
         max_iter,
-        opts.should_stop,
         &mut work,
     )?;
     let failed = |o: &cg::Outcome, what: &str| Error::NotConverged {
@@ -346,16 +345,14 @@ pub(super) fn solve_multigrid(
     drop(b_in);
     let b_out = out_rows.dense(n);
     let b = cg::refined(
-        &apply,
         &exact,
-        &mut pre,
+        &mut correct,
         &accurate(mg, &in_rows, qtol),
         &b_out,
         &mut psi,
         None,
         opts.tol,
         max_iter,
-        opts.should_stop,
         &mut work,
     )?;
     let total = cg::Outcome {
@@ -374,9 +371,78 @@ pub(super) fn solve_multigrid(
         )));
     }
     drop(work);
+    drop(correction);
     let x = mg.scatter(&x);
     let psi = mg.scatter(&psi);
     Ok(Ok((x, psi, total.residual, total.iterations)))
+}
+
+/// The refinement's inner solve on the multigrid: `A δ = r` reduced to the Schur complement
+/// `S` of the red unknowns (`S δ_B = s`, [`Multigrid::reduce`]), solved there by CG
+/// preconditioned with one V-cycle on `S`, with `S` applied in double precision from the
+/// stencil, then `δ_R` from `δ_B` ([`Multigrid::extend`]). The same Krylov method as CG on
+/// `A` with the block preconditioner `L⁻ᵀ diag(D_R⁻¹, M_S) L⁻¹` (docs/flow.md), without
+/// the red half in its vectors and products. Without a reduction (the finest level is the
+/// coarsest), CG on `A` with the dense factor.
+struct Correction<'a> {
+    mg: &'a Multigrid,
+    should_stop: Option<&'a (dyn Fn() -> bool + Sync)>,
+    inner: cg::Inner,
+    /// Right-hand side (then residual) and solution on `S`.
+    s: Vec<f64>,
+    xs: Vec<f64>,
+}
+
+impl<'a> Correction<'a> {
+    fn new(mg: &'a Multigrid, should_stop: Option<&'a (dyn Fn() -> bool + Sync)>) -> Self {
+        let m = mg.reduced_len().unwrap_or(mg.n_unknowns());
+        let own = if mg.reduced_len().is_some() { m } else { 0 };
+        Correction {
+            mg,
+            should_stop,
+            inner: cg::Inner::new(m),
+            s: vec![0.0; own],
+            xs: vec![0.0; own],
+        }
+    }
+
+    /// `d ≈ A⁻¹ r` (`r` is overwritten without a reduction).
+    fn correct(&mut self, r: &mut [f64], d: &mut [f64], max_iter: usize) -> Result<cg::Outcome> {
+        let mg = self.mg;
+        if mg.reduced_len().is_none() {
+            return cg::pcg(
+                &mut |v, y| mg.operator(v, y),
+                &mut |r, z| mg.precondition(r, z),
+                r,
+                d,
+                cg::INNER_TOL,
+                max_iter,
+                self.should_stop,
+                &mut self.inner,
+            );
+        }
+        mg.reduce(r, &mut self.s);
+        // The fine residual after the correction is `(0, s − S δ_B)`: CG on `S` stops where
+        // that is `INNER_TOL` of the fine `r`, as CG on `A` would.
+        let (rn, sn) = (cg::dot(r, r).sqrt(), cg::dot(&self.s, &self.s).sqrt());
+        let tol = if sn > 0.0 {
+            cg::INNER_TOL * rn / sn
+        } else {
+            cg::INNER_TOL
+        };
+        let outcome = cg::pcg(
+            &mut |v, y| mg.reduced_product(v, y),
+            &mut |s, z| mg.cycle(s, z),
+            &mut self.s,
+            &mut self.xs,
+            tol,
+            max_iter,
+            self.should_stop,
+            &mut self.inner,
+        )?;
+        mg.extend(r, &self.xs, d);
+        Ok(outcome)
+    }
 }
 
 /// The non-zero entries of a reservoir's vector (its row's cells only), in index order.

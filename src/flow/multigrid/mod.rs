@@ -11,6 +11,12 @@
 //! halved the unknowns too) this took the 4097² gap's multigrid from 42 to 39 CG iterations,
 //! its cycle from 0.45 to 0.29 s and its setup from 12.3 to 6.8 s (docs/flow.md).
 //!
+//! CG with that preconditioner on `A` is CG on `S` with `M_S`, the red half carried along:
+//! so the refinement's inner solves run on `S` itself ([`Multigrid::reduce`], CG on
+//! [`Multigrid::reduced_product`] and [`Multigrid::cycle`], [`Multigrid::extend`]), `S`
+//! applied in double precision from the stencil, not from its stored single-precision
+//! faces. [`Multigrid::precondition`] is the block preconditioner on `A` itself.
+//!
 //! # Why classical coarsening
 //!
 //! Near the percolation threshold the spanning cluster is a maze of necks, dead ends and
@@ -112,6 +118,8 @@ use cycle::{vcycle, Fine, SharedMut};
 use galerkin::galerkin;
 use interpolate::interpolation;
 use reduce::Reduction;
+#[cfg(test)]
+use reduce::PRODUCT_BLOCK;
 use rows::Rows;
 
 /// Strength threshold θ.
@@ -430,14 +438,17 @@ impl Multigrid {
             levels.push(c);
         }
         // Without the reduction the finest level is the coarsest, solved by the dense
-        // factor on the caller's vectors: no buffers.
+        // factor on the caller's vectors: no buffers. With it, `S`'s right-hand side and
+        // solution are the caller's vectors too ([`Multigrid::cycle`]): only its scratch.
         let bufs = levels
             .iter()
-            .map(|g| {
+            .enumerate()
+            .map(|(l, g)| {
                 let n = if reduction.is_some() { g.n } else { 0 };
+                let own = if l == 0 { 0 } else { n };
                 Buffers {
-                    x: vec![0.0; n],
-                    b: vec![0.0; n],
+                    x: vec![0.0; own],
+                    b: vec![0.0; own],
                     r: vec![0.0; n],
                 }
             })
@@ -598,23 +609,46 @@ impl Multigrid {
             self.coarse.solve(r, z);
             return;
         };
-        let mut bufs = self.bufs.lock().unwrap_or_else(|e| e.into_inner());
         let top = self.top();
-        // The Schur complement's right-hand side and solution, out of their buffers for the
-        // cycle (no copy) and put back after.
-        let mut b = std::mem::take(&mut bufs[0].b);
-        let mut x = std::mem::take(&mut bufs[0].x);
+        let mut b = vec![0.0; red.len()];
+        let mut x = vec![0.0; red.len()];
         red.restrict(&top, r, &mut b);
-        vcycle(
-            &self.levels,
-            &self.interps,
-            &b,
-            &mut x,
-            &mut bufs,
-            &self.coarse,
-        );
+        self.cycle(&b, &mut x);
         red.extend(&top, r, &x, z);
-        bufs[0].b = b;
-        bufs[0].x = x;
+    }
+
+    /// Unknowns of the Schur complement `S` on which the refinement's corrections are solved
+    /// ([`reduce`]); `None` when the finest level is the coarsest (no reduction).
+    pub fn reduced_len(&self) -> Option<usize> {
+        self.reduction.as_ref().map(Reduction::len)
+    }
+
+    /// `s = r_B + W_BR D_R⁻¹ r_R`: the right-hand side on `S` of the fine system with
+    /// right-hand side `r` (`A d = r` ⇔ `S d_B = s`, `d_R = D_R⁻¹ (r_R + W_RB d_B)`).
+    pub fn reduce(&self, r: &[f64], s: &mut [f64]) {
+        if let Some(red) = &self.reduction {
+            red.restrict(&self.top(), r, s);
+        }
+    }
+
+    /// `d_B = d_s`, `d_R = D_R⁻¹ (r_R + W_RB d_s)`: the fine solution of `A d = r` from the
+    /// solution `d_s` on `S`.
+    pub fn extend(&self, r: &[f64], ds: &[f64], d: &mut [f64]) {
+        if let Some(red) = &self.reduction {
+            red.extend(&self.top(), r, ds, d);
+        }
+    }
+
+    /// `y = S v` in double precision from the stencil ([`Reduction::schur_product`]).
+    pub fn reduced_product(&self, v: &[f64], y: &mut [f64]) {
+        if let Some(red) = &self.reduction {
+            red.schur_product(&self.top(), v, y);
+        }
+    }
+
+    /// `z = M_S⁻¹ s`: one V-cycle from 0 on `S` (the multigrid below the reduction).
+    pub fn cycle(&self, s: &[f64], z: &mut [f64]) {
+        let mut bufs = self.bufs.lock().unwrap_or_else(|e| e.into_inner());
+        vcycle(&self.levels, &self.interps, s, z, &mut bufs, &self.coarse);
     }
 }

@@ -35,11 +35,20 @@ use rayon::prelude::*;
 use super::cycle::Fine;
 use super::{concat, Graph, RowBlock, CHUNK, NONE};
 
+/// Kept unknowns per block of [`Reduction::schur_product`] (some 27 grid rows at 4097²,
+/// so that recomputing the red cells of the rows around a block costs a few per cent).
+pub(super) const PRODUCT_BLOCK: usize = 4 * CHUNK;
+
+/// The tag of a red unknown's [`Reduction::slot`] (fine unknowns number below 2^31).
+const RED: u32 = 1 << 31;
+
 /// The red (eliminated) and black (kept) fine unknowns.
 pub(super) struct Reduction {
     /// Fine unknown of each kept unknown, ascending.
     pub(super) kept: Vec<u32>,
-    /// Kept index of each fine unknown; [`NONE`] for an eliminated one.
+    /// Fine unknown of each red unknown, ascending.
+    reds: Vec<u32>,
+    /// Of each fine unknown: its kept index, or [`RED`] with its red index.
     pub(super) slot: Vec<u32>,
 }
 
@@ -60,15 +69,26 @@ impl Reduction {
             .with_min_len(CHUNK)
             .map(|&k| red(k as usize, nx, periodic))
             .collect();
+        assert!(is_red.len() < RED as usize, "fine unknowns below 2^31");
         let mut slot = vec![NONE; is_red.len()];
         let mut kept = Vec::with_capacity(is_red.len() / 2 + 1);
+        let mut reds = Vec::with_capacity(is_red.len() / 2 + 1);
         for (i, &r) in is_red.iter().enumerate() {
-            if !r {
+            if r {
+                slot[i] = RED | reds.len() as u32;
+                reds.push(i as u32);
+            } else {
                 slot[i] = kept.len() as u32;
                 kept.push(i as u32);
             }
         }
-        Reduction { kept, slot }
+        Reduction { kept, reds, slot }
+    }
+
+    /// Whether fine unknown `i` is red.
+    #[inline(always)]
+    pub(super) fn is_red(&self, i: usize) -> bool {
+        self.slot[i] & RED != 0
     }
 
     /// Kept unknowns (the size of `S`).
@@ -78,7 +98,7 @@ impl Reduction {
 
     /// Bytes held.
     pub(super) fn bytes(&self) -> usize {
-        4 * (self.kept.len() + self.slot.len())
+        4 * (self.kept.len() + self.reds.len() + self.slot.len())
     }
 
     /// The Schur complement `S` on the kept unknowns, in conductance form (module docs).
@@ -114,7 +134,7 @@ impl Reduction {
                             return;
                         }
                         let sj = self.slot[j as usize];
-                        if sj != NONE {
+                        if sj & RED == 0 {
                             add(&mut acc, sj, wij);
                             return;
                         }
@@ -152,7 +172,7 @@ impl Reduction {
                 let mut v = r[i];
                 top.st.for_each_face(top.cells[i] as usize, |l, c| {
                     let j = top.index[l];
-                    if j != NONE && self.slot[j as usize] == NONE {
+                    if j != NONE && self.is_red(j as usize) {
                         v += c * r[j as usize] / top.st.d[l];
                     }
                 });
@@ -161,13 +181,81 @@ impl Reduction {
         });
     }
 
+    /// `y = S v = A_BB v − W_BR D_R⁻¹ W_RB v` on the kept unknowns, from the stencil in
+    /// double precision (not from the stored single-precision `S`). In blocks of
+    /// [`PRODUCT_BLOCK`] kept unknowns, in one pass over the grid: walking the block's rows,
+    /// `u_r = (W_RB v)_r / d_r` of the red unknowns up to one grid row ahead, then the kept
+    /// rows, which read `u` of their red neighbours from the block's buffer (recently
+    /// computed, so in cache). Each block computes the red unknowns of the grid row before
+    /// and after it again. Every entry is the same sum whatever the blocks.
+    pub(super) fn schur_product(&self, top: &Fine<'_>, v: &[f64], y: &mut [f64]) {
+        let nx = top.st.nx;
+        let last = top.st.ny * nx - 1;
+        let cell_of = |i: u32| top.cells[i as usize] as usize;
+        y.par_chunks_mut(PRODUCT_BLOCK)
+            .enumerate()
+            .for_each_init(Vec::new, |u, (blk, yc)| {
+                let s0 = blk * PRODUCT_BLOCK;
+                // The red unknowns whose cells lie from a grid row before the block's first
+                // cell to a row after its last: all the red neighbours of its rows.
+                let (ka, kb) = (
+                    cell_of(self.kept[s0]),
+                    cell_of(self.kept[s0 + yc.len() - 1]),
+                );
+                let r_lo = self
+                    .reds
+                    .partition_point(|&i| cell_of(i) < ka.saturating_sub(nx));
+                let r_hi = self
+                    .reds
+                    .partition_point(|&i| cell_of(i) <= (kb + nx).min(last));
+                u.clear();
+                u.resize(r_hi - r_lo, 0.0);
+                let mut r = r_lo;
+                for (t, o) in yc.iter_mut().enumerate() {
+                    let s = s0 + t;
+                    let k = cell_of(self.kept[s]);
+                    // Red unknowns up to a row ahead (the south face and a wrapped east face
+                    // reach at most `k + nx`).
+                    let ahead = (k + nx).min(last);
+                    while r < r_hi && cell_of(self.reds[r]) <= ahead {
+                        let kr = cell_of(self.reds[r]);
+                        let mut a = 0.0;
+                        // Every neighbour of a red unknown is kept.
+                        top.st.for_each_face(kr, |l, c| {
+                            let j = top.index[l];
+                            if j != NONE {
+                                a += c * v[self.slot[j as usize] as usize];
+                            }
+                        });
+                        u[r - r_lo] = a / top.st.d[kr];
+                        r += 1;
+                    }
+                    let mut a = 0.0;
+                    top.st.for_each_face(k, |l, c| {
+                        let j = top.index[l];
+                        if j == NONE {
+                            return;
+                        }
+                        let sj = self.slot[j as usize];
+                        // A kept neighbour: the wrapped odd column's faces (A_BB).
+                        a += c * if sj & RED == 0 {
+                            v[sj as usize]
+                        } else {
+                            u[(sj & !RED) as usize - r_lo]
+                        };
+                    });
+                    *o = top.st.d[k] * v[s] - a;
+                }
+            });
+    }
+
     /// `z_B = z_s`, `z_R = D_R⁻¹ (r_R + W_RB z_s)` on the fine unknowns.
     pub(super) fn extend(&self, top: &Fine<'_>, r: &[f64], zs: &[f64], z: &mut [f64]) {
         z.par_chunks_mut(CHUNK).enumerate().for_each(|(blk, zc)| {
             for (t, o) in zc.iter_mut().enumerate() {
                 let i = blk * CHUNK + t;
                 let s = self.slot[i];
-                if s != NONE {
+                if s & RED == 0 {
                     *o = zs[s as usize];
                     continue;
                 }
