@@ -42,6 +42,17 @@ pub(super) fn split(g: &impl Rows, wmax: &[f64]) -> (Vec<u32>, usize) {
 
 /// [`split`] with blocks of `block` unknowns.
 pub(super) fn split_in_blocks(g: &impl Rows, wmax: &[f64], block: usize) -> (Vec<u32>, usize) {
+    split_with(g, wmax, block, true)
+}
+
+/// [`split_in_blocks`]; `sift`: the second pass visits only the F unknowns left uncovered
+/// by the first (else every F unknown: the same split, tested).
+pub(super) fn split_with(
+    g: &impl Rows,
+    wmax: &[f64],
+    block: usize,
+    sift: bool,
+) -> (Vec<u32>, usize) {
     let n = g.n();
     let mut state = vec![UNDECIDED; n];
     state
@@ -54,11 +65,22 @@ pub(super) fn split_in_blocks(g: &impl Rows, wmax: &[f64], block: usize) -> (Vec
     // unknowns as the first pass left them (a C stays C, so a common C neighbour found
     // stays one); pairs with `k` in another block are kept for the end.
     let first = state.clone();
+    // The second pass only turns F unknowns into C: an F unknown's strong C neighbours only
+    // grow and its strong F neighbours only shrink, so one without an uncovered strong F
+    // neighbour after the first pass has none later. Found in parallel, only the others are
+    // visited in order (the same split as visiting all).
+    let open: Vec<bool> = (0..n)
+        .into_par_iter()
+        .with_min_len(CHUNK)
+        .map(|i| first[i] == F && (!sift || uncovered(g, wmax, i, &first)))
+        .collect();
     let deferred: Vec<(u32, u32)> = state
         .par_chunks_mut(block)
+        .zip(open.par_chunks(block))
         .enumerate()
-        .flat_map_iter(|(b, st)| second_pass(g, wmax, b * block, st, &first))
+        .flat_map_iter(|(b, (st, op))| second_pass(g, wmax, b * block, st, &first, op))
         .collect();
+    drop(open);
     drop(first);
     let mut ci: Vec<u32> = Vec::new();
     for &(i, k) in &deferred {
@@ -96,6 +118,8 @@ fn first_pass(g: &impl Rows, wmax: &[f64], i0: usize, state: &mut [u8]) {
     // λ_i: unknowns of the block that depend strongly on i (i strongly influences j:
     // w_ji ≥ θ max_k w_jk; w_ji = w_ij, symmetric).
     let mut lambda: Vec<u32> = (0..n)
+        .into_par_iter()
+        .with_min_len(CHUNK)
         .map(|t| {
             g.row(i0 + t)
                 .filter(|&(j, w)| inside(j) && strong(w, wmax[j as usize]))
@@ -202,21 +226,38 @@ fn first_pass(g: &impl Rows, wmax: &[f64], i0: usize, state: &mut [u8]) {
     }
 }
 
+/// Whether F unknown `i` has a strong F neighbour joined to none of its strong C neighbours
+/// (in `state`).
+fn uncovered(g: &impl Rows, wmax: &[f64], i: usize, state: &[u8]) -> bool {
+    let strong_c = || {
+        g.row(i)
+            .filter(|&(j, w)| state[j as usize] == C && strong(w, wmax[i]))
+            .map(|(j, _)| j)
+    };
+    g.row(i).any(|(k, w)| {
+        state[k as usize] == F
+            && strong(w, wmax[i])
+            && !strong_c().any(|m| g.weight(k as usize, m) > 0.0)
+    })
+}
+
 /// Ruge–Stüben second pass on the unknowns `i0..i0 + state.len()` in unknown order (the
-/// other blocks' unknowns read from `first`); the strong F pairs `(i, k)` with `k` outside
-/// the block, for the final check.
+/// other blocks' unknowns read from `first`), visiting only those marked in `open`
+/// ([`uncovered`] after the first pass); the strong F pairs `(i, k)` with `k` outside the
+/// block, for the final check.
 fn second_pass(
     g: &impl Rows,
     wmax: &[f64],
     i0: usize,
     state: &mut [u8],
     first: &[u8],
+    open: &[bool],
 ) -> Vec<(u32, u32)> {
     let n = state.len();
     let mut deferred = Vec::new();
     let mut ci: Vec<u32> = Vec::new();
     for t in 0..n {
-        if state[t] != F {
+        if !open[t] || state[t] != F {
             continue;
         }
         let i = i0 + t;

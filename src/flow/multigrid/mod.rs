@@ -112,7 +112,7 @@ use super::assemble::Stencil;
 use super::cg::{profiling, secs, CHUNK};
 use coarsen::{split, strong, strongest};
 #[cfg(test)]
-use coarsen::{split_in_blocks, SPLIT_BLOCK};
+use coarsen::{split_in_blocks, split_with, SPLIT_BLOCK};
 use coarsest::DenseCholesky;
 use cycle::{vcycle, Fine, SharedMut};
 use galerkin::galerkin;

@@ -48,6 +48,26 @@ fn every_strong_f_pair_shares_a_c_neighbour() {
 }
 
 #[test]
+fn the_sifted_second_pass_splits_as_visiting_every_f_unknown() {
+    // One block and blocks of 97 and 1000 unknowns, on grids spanning six decades.
+    for seed in 0..3 {
+        let st = rough(seed, 120, 90);
+        let (cells, index) = unknowns(&st);
+        let g = Fine {
+            st: &st,
+            cells: &cells,
+            index: &index,
+        };
+        let wmax = strongest(&g);
+        for block in [SPLIT_BLOCK, 97, 1000] {
+            let sifted = split_with(&g, &wmax, block, true);
+            let all = split_with(&g, &wmax, block, false);
+            assert_eq!(sifted, all, "seed {seed}, blocks of {block}");
+        }
+    }
+}
+
+#[test]
 fn fine_rows_from_the_stencil_are_its_faces() {
     // The rows read from the stencil against brute force over the grid's face arrays.
     for periodic in [false, true] {
