@@ -47,7 +47,7 @@ pub fn love_displacement(x: f64, y: f64, dx: f64, e_star: f64) -> f64 {
 
 /// The kernel table `K[|di|, |dj|]`, row-major `ny × nx`: displacement at a centre `di` rows and
 /// `dj` columns away from a unit-pressure element.
-/// Refused with [`Error::TooLarge`] when the table cannot be allocated.
+/// Refused with [`Error::TooLarge`](crate::Error::TooLarge) when the table cannot be allocated.
 pub fn try_kernel_table(ny: usize, nx: usize, dx: f64, e_star: f64) -> Result<Vec<f64>> {
     let n = alloc::checked_cells(ny, nx, "the kernel table")?;
     let mut k: Vec<f64> = alloc::try_zeroed(n, &format!("the {ny} × {nx} kernel table"))?;
@@ -102,7 +102,7 @@ pub struct Kernel {
 }
 
 impl Kernel {
-    /// The Love kernel, refused with [`Error::TooLarge`] when its table cannot be allocated.
+    /// The Love kernel, refused with [`Error::TooLarge`](crate::Error::TooLarge) when its table cannot be allocated.
     pub fn try_new(ny: usize, nx: usize, dx: f64, e_star: f64) -> Result<Self> {
         Ok(Kernel {
             ny,
