@@ -14,55 +14,45 @@ fn rough(seed: u64, ny: usize, nx: usize) -> Stencil {
 
 #[test]
 fn every_strong_f_pair_shares_a_c_neighbour() {
-    for seed in 0..4 {
-        let st = rough(seed, 60, 50);
-        let (cells, index) = unknowns(&st);
-        let g = Fine {
-            st: &st,
-            cells: &cells,
-            index: &index,
-        };
-        let wmax = strongest(&g);
-        // One block (3000 unknowns at most), and blocks of 97 unknowns: the pairs across
-        // block boundaries too.
-        let block = if seed >= 2 { 97 } else { SPLIT_BLOCK };
-        let (cidx, nc) = split_in_blocks(&g, &wmax, block);
-        assert!(nc > 0 && nc < g.n());
-        for i in (0..g.n()).filter(|&i| cidx[i] == NONE) {
-            let ci: Vec<u32> = g
-                .row(i)
-                .filter(|&(j, w)| strong(w, wmax[i]) && cidx[j as usize] != NONE)
-                .map(|(j, _)| j)
-                .collect();
-            assert!(!ci.is_empty(), "F unknown {i} has no strong C neighbour");
-            for (k, w) in g.row(i) {
-                if cidx[k as usize] == NONE && strong(w, wmax[i]) {
-                    assert!(
-                        ci.iter().any(|&m| g.weight(k as usize, m) > 0.0),
-                        "strong F pair {i}, {k} without a common C neighbour"
-                    );
+    // One block (10800 unknowns at most), and blocks of 97 and 1000 unknowns: the pairs
+    // across block boundaries too. The second pass visiting only the F unknowns the first
+    // left uncovered splits as visiting every F unknown.
+    for (ny, nx) in [(60, 50), (120, 90)] {
+        for seed in 0..4 {
+            let st = rough(seed, ny, nx);
+            let (cells, index) = unknowns(&st);
+            let g = Fine {
+                st: &st,
+                cells: &cells,
+                index: &index,
+            };
+            let wmax = strongest(&g);
+            for block in [SPLIT_BLOCK, 97, 1000] {
+                let (cidx, nc) = split_in_blocks(&g, &wmax, block);
+                assert_eq!(
+                    (cidx.clone(), nc),
+                    split_with(&g, &wmax, block, false),
+                    "sifted and full second pass differ ({ny} × {nx}, seed {seed}, blocks of \
+                     {block})"
+                );
+                assert!(nc > 0 && nc < g.n());
+                for i in (0..g.n()).filter(|&i| cidx[i] == NONE) {
+                    let ci: Vec<u32> = g
+                        .row(i)
+                        .filter(|&(j, w)| strong(w, wmax[i]) && cidx[j as usize] != NONE)
+                        .map(|(j, _)| j)
+                        .collect();
+                    assert!(!ci.is_empty(), "F unknown {i} has no strong C neighbour");
+                    for (k, w) in g.row(i) {
+                        if cidx[k as usize] == NONE && strong(w, wmax[i]) {
+                            assert!(
+                                ci.iter().any(|&m| g.weight(k as usize, m) > 0.0),
+                                "strong F pair {i}, {k} without a common C neighbour"
+                            );
+                        }
+                    }
                 }
             }
-        }
-    }
-}
-
-#[test]
-fn the_sifted_second_pass_splits_as_visiting_every_f_unknown() {
-    // One block and blocks of 97 and 1000 unknowns, on grids spanning six decades.
-    for seed in 0..3 {
-        let st = rough(seed, 120, 90);
-        let (cells, index) = unknowns(&st);
-        let g = Fine {
-            st: &st,
-            cells: &cells,
-            index: &index,
-        };
-        let wmax = strongest(&g);
-        for block in [SPLIT_BLOCK, 97, 1000] {
-            let sifted = split_with(&g, &wmax, block, true);
-            let all = split_with(&g, &wmax, block, false);
-            assert_eq!(sifted, all, "seed {seed}, blocks of {block}");
         }
     }
 }
