@@ -65,12 +65,22 @@ pub(super) fn vcycle(
     // recursion (no copy) and put back after.
     let mut bc = std::mem::take(&mut rest[0].b);
     let mut xc = std::mem::take(&mut rest[0].x);
+    let (n, nc) = (x.len(), bc.len());
+    assert!(
+        ip.ptr.len() == n + 1 && r.len() == n && ip.tptr.len() == nc + 1 && xc.len() == nc,
+        "transfers between vectors of the levels' sizes"
+    );
+    // SAFETY (both transfers): the chunks cover vectors of the lengths just checked, and
+    // the interpolation's rows both ways were checked when it was built (`check_rows`).
     bc.par_chunks_mut(CHUNK).enumerate().for_each(|(blk, bs)| {
         for (t, bv) in bs.iter_mut().enumerate() {
             let c = blk * CHUNK + t;
             let mut s = 0.0;
-            for q in ip.tptr[c]..ip.tptr[c + 1] {
-                s += f64::from(ip.tval[q]) * r[ip.trow[q] as usize];
+            unsafe {
+                for q in *ip.tptr.get_unchecked(c)..*ip.tptr.get_unchecked(c + 1) {
+                    s += f64::from(*ip.tval.get_unchecked(q))
+                        * r.get_unchecked(*ip.trow.get_unchecked(q) as usize);
+                }
             }
             *bv = s;
         }
@@ -81,8 +91,11 @@ pub(super) fn vcycle(
         for (t, v) in xs.iter_mut().enumerate() {
             let i = blk * CHUNK + t;
             let mut s = 0.0;
-            for p in ip.ptr[i]..ip.ptr[i + 1] {
-                s += f64::from(ip.val[p]) * xcr[ip.col[p] as usize];
+            unsafe {
+                for p in *ip.ptr.get_unchecked(i)..*ip.ptr.get_unchecked(i + 1) {
+                    s += f64::from(*ip.val.get_unchecked(p))
+                        * xcr.get_unchecked(*ip.col.get_unchecked(p) as usize);
+                }
             }
             *v += s;
         }

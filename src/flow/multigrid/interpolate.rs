@@ -3,7 +3,7 @@
 use rayon::prelude::*;
 
 use super::rows::Rows;
-use super::{concat, strong, Interp, RowBlock, CHUNK, NONE};
+use super::{check_rows, concat, strong, Interp, RowBlock, CHUNK, NONE};
 
 /// Classical interpolation (module docs) and the row-sum deficits `δ_i = dir_i / den`.
 pub(super) fn interpolation(
@@ -99,6 +99,9 @@ pub(super) fn interpolation(
             fill[c] += 1;
         }
     }
+    assert_eq!(val.len(), col.len(), "a weight per column");
+    check_rows(&ptr, &col, n, nc);
+    check_rows(&tptr, &trow, nc, n);
     (
         Interp {
             ptr,

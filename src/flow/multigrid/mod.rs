@@ -202,21 +202,49 @@ pub fn memory_estimate(unknowns: usize) -> u64 {
 impl Graph {
     /// `r = b − A x`.
     fn residual(&self, x: &[f64], b: &[f64], r: &mut [f64]) {
+        self.check_vectors(&[x, b, &*r]);
         r.par_chunks_mut(CHUNK).enumerate().for_each(|(blk, rc)| {
             let i0 = blk * CHUNK;
             for (t, rv) in rc.iter_mut().enumerate() {
                 let i = i0 + t;
-                let mut v = b[i] - self.d[i] * x[i];
-                for p in self.ptr[i]..self.ptr[i + 1] {
-                    v += f64::from(self.w[p]) * x[self.col[p] as usize];
+                // SAFETY: `i < n` (the chunks cover `r`, of length `n`); the rows were checked
+                // when the level was built (`check_rows`: pointers within the entries, columns
+                // below `n`) and the vectors' lengths above.
+                unsafe {
+                    let mut v = b.get_unchecked(i) - self.d.get_unchecked(i) * x.get_unchecked(i);
+                    for p in *self.ptr.get_unchecked(i)..*self.ptr.get_unchecked(i + 1) {
+                        v += f64::from(*self.w.get_unchecked(p))
+                            * x.get_unchecked(*self.col.get_unchecked(p) as usize);
+                    }
+                    *rv = v;
                 }
-                *rv = v;
             }
         });
     }
 
+    /// What the unchecked loops rely on beyond `check_rows`: stored rows (not a level
+    /// applied from the stencil) and vectors of the level's size.
+    fn check_vectors(&self, vs: &[&[f64]]) {
+        assert!(
+            self.ptr.len() == self.n + 1 && self.d.len() == self.n,
+            "a level with stored rows"
+        );
+        assert!(
+            vs.iter().all(|v| v.len() == self.n),
+            "vectors of the level's size"
+        );
+    }
+
     /// ℓ1 hybrid Gauss–Seidel sweep (module docs); `old` is scratch of size `n`.
+    ///
+    /// The face to the row swept just before (`i − 1`, or `i + 1` when `reverse`) is added
+    /// last and the divisor is applied as its reciprocal: the only dependence from one row
+    /// to the next is then one multiply-add and one multiply, not the whole row's sum and a
+    /// division. The loops index without bounds checks (what they rely on is checked once
+    /// per level by `check_rows`, and the vectors' lengths here): they are bound by the
+    /// instructions they execute, and a check per column, weight and value doubled them.
     fn smooth(&self, b: &[f64], x: &mut [f64], old: &mut [f64], reverse: bool) {
+        self.check_vectors(&[&*x, b, &*old]);
         old.copy_from_slice(x);
         let old = &*old;
         x.par_chunks_mut(CHUNK).enumerate().for_each(|(blk, xc)| {
@@ -224,20 +252,32 @@ impl Graph {
             let i1 = i0 + xc.len();
             let mut update = |t: usize| {
                 let i = i0 + t;
-                let mut v = b[i] - self.d[i] * xc[t];
-                let mut out = 0.0;
-                for p in self.ptr[i]..self.ptr[i + 1] {
-                    let j = self.col[p] as usize;
-                    let w = f64::from(self.w[p]);
-                    let xj = if j >= i0 && j < i1 {
-                        xc[j - i0]
-                    } else {
-                        out += w.abs();
-                        old[j]
-                    };
-                    v += w * xj;
+                // The row swept just before this one (none at the block's edge).
+                let prev = if reverse { i + 1 } else { i.wrapping_sub(1) };
+                // SAFETY: `i0 ≤ i < i1 ≤ n`; columns are below `n` and pointers within the
+                // entries (`check_rows`); a column in `[i0, i1)` indexes `xc` at `j − i0`.
+                unsafe {
+                    let mut v = b.get_unchecked(i) - self.d.get_unchecked(i) * xc.get_unchecked(t);
+                    let mut out = 0.0;
+                    let mut w_prev = 0.0;
+                    for p in *self.ptr.get_unchecked(i)..*self.ptr.get_unchecked(i + 1) {
+                        let j = *self.col.get_unchecked(p) as usize;
+                        let w = f64::from(*self.w.get_unchecked(p));
+                        if j == prev && j >= i0 && j < i1 {
+                            w_prev = w;
+                        } else if j >= i0 && j < i1 {
+                            v += w * xc.get_unchecked(j - i0);
+                        } else {
+                            out += w.abs();
+                            v += w * old.get_unchecked(j);
+                        }
+                    }
+                    let inv = 1.0 / (self.d.get_unchecked(i) + out);
+                    if prev >= i0 && prev < i1 {
+                        v += w_prev * xc.get_unchecked(prev - i0);
+                    }
+                    *xc.get_unchecked_mut(t) += v * inv;
                 }
-                xc[t] += v / (self.d[i] + out);
             };
             if reverse {
                 for t in (0..i1 - i0).rev() {
@@ -256,6 +296,8 @@ impl Graph {
     /// of its rounded faces exactly.
     fn from_faces(ptr: Vec<usize>, col: Vec<u32>, w: Vec<f32>, dir: Vec<f64>) -> Self {
         let n = dir.len();
+        check_rows(&ptr, &col, n, n);
+        assert_eq!(w.len(), col.len(), "a weight per column");
         let d: Vec<f64> = (0..n)
             .into_par_iter()
             .with_min_len(CHUNK)
@@ -296,6 +338,27 @@ impl Graph {
             d: Vec::new(),
         }
     }
+}
+
+/// Checks compressed rows once, where they are built, for the loops that then index them
+/// without bounds checks: `rows + 1` pointers from 0 to the entry count, never decreasing,
+/// and every column below `cols`.
+fn check_rows(ptr: &[usize], col: &[u32], rows: usize, cols: usize) {
+    assert_eq!(
+        ptr.len(),
+        rows + 1,
+        "a pointer per row and one past the last"
+    );
+    assert_eq!(ptr[0], 0, "rows start at the first entry");
+    assert_eq!(ptr[rows], col.len(), "rows end at the last entry");
+    assert!(
+        ptr.windows(2).all(|p| p[0] <= p[1]),
+        "row pointers never decrease"
+    );
+    assert!(
+        col.par_iter().all(|&c| (c as usize) < cols),
+        "columns within the level"
+    );
 }
 
 /// The cell of each unknown (the active cells in grid order) and the unknown of each cell.
