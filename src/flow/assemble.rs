@@ -130,7 +130,31 @@ impl Stencil {
     /// Calls `f(l, c)` for every face of cell `k` with conductance `c > 0` to neighbour `l`
     /// (east, west, south, north, with the wrap).
     #[inline(always)]
-    pub fn for_each_face(&self, k: usize, mut f: impl FnMut(usize, f64)) {
+    pub fn for_each_face(&self, k: usize, f: impl FnMut(usize, f64)) {
+        assert!(
+            k < self.ny * self.nx && self.faces_complete(),
+            "a cell of a complete stencil"
+        );
+        // SAFETY: checked just above.
+        unsafe { self.for_each_face_unchecked(k, f) }
+    }
+
+    /// Whether the face arrays cover the grid: what [`Stencil::for_each_face_unchecked`]
+    /// relies on, checked once by a caller that walks many cells.
+    pub fn faces_complete(&self) -> bool {
+        let n = self.ny * self.nx;
+        self.e.len() == n && self.s.len() == n
+    }
+
+    /// [`Stencil::for_each_face`] without bounds checks, for the loops that are bound by the
+    /// instructions they execute (the multigrid's product with its Schur complement).
+    ///
+    /// # Safety
+    ///
+    /// `self.faces_complete()` and `k < ny · nx`; then every face index read is below
+    /// `ny · nx`, and so is every neighbour `l` passed to `f`.
+    #[inline(always)]
+    pub unsafe fn for_each_face_unchecked(&self, k: usize, mut f: impl FnMut(usize, f64)) {
         let (ny, nx) = (self.ny, self.nx);
         let (i, j) = (k / nx, k % nx);
         let base = i * nx;
@@ -139,19 +163,20 @@ impl Stencil {
                 f(l, w)
             }
         };
+        let (e, s) = (&self.e, &self.s);
         if j + 1 < nx {
-            face(k + 1, self.e[k]);
+            face(k + 1, *e.get_unchecked(k));
         } else if self.periodic && nx > 1 {
-            face(base, self.e[k]);
+            face(base, *e.get_unchecked(k));
         }
         if let Some(wj) = self.west(j) {
-            face(base + wj, self.e[base + wj]);
+            face(base + wj, *e.get_unchecked(base + wj));
         }
         if i + 1 < ny {
-            face(k + nx, self.s[k]);
+            face(k + nx, *s.get_unchecked(k));
         }
         if i > 0 {
-            face(k - nx, self.s[k - nx]);
+            face(k - nx, *s.get_unchecked(k - nx));
         }
     }
 

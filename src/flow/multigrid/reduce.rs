@@ -205,7 +205,24 @@ impl Reduction {
     pub(super) fn schur_product(&self, top: &Fine<'_>, v: &[f64], y: &mut [f64]) {
         let nx = top.st.nx;
         let last = top.st.ny * nx - 1;
+        // What the unchecked loads below rely on: the stencil's faces and diagonal cover the
+        // grid, a slot per cell, and vectors with an entry per kept unknown (every kept slot
+        // is below `kept.len()` by construction, every cell of an unknown below the grid's
+        // size). A bounds check per face doubled this loop's instructions.
+        assert!(
+            top.st.faces_complete()
+                && top.st.d.len() == last + 1
+                && self.cell_slot.len() == last + 1
+                && v.len() == self.kept.len()
+                && y.len() == self.kept.len(),
+            "the Schur product's stencil, slots and vectors cover the grid"
+        );
         let cell_of = |i: u32| top.cells[i as usize] as usize;
+        // The slot of neighbour `l` of a cell (`l` below the grid's size).
+        // SAFETY: `cell_slot` has one entry per cell (checked above).
+        let slot_of = |l: usize| unsafe { *self.cell_slot.get_unchecked(l) };
+        // SAFETY: a kept slot is below `kept.len() = v.len()` (checked above).
+        let v_at = |sj: u32| unsafe { *v.get_unchecked(sj as usize) };
         y.par_chunks_mut(PRODUCT_BLOCK)
             .enumerate()
             .for_each_init(Vec::new, |u, (blk, yc)| {
@@ -235,28 +252,34 @@ impl Reduction {
                         let kr = cell_of(self.reds[r]);
                         let mut a = 0.0;
                         // Every neighbour of a red unknown is kept.
-                        top.st.for_each_face(kr, |l, c| {
-                            let sj = self.cell_slot[l];
-                            if sj != NONE {
-                                a += c * v[sj as usize];
-                            }
-                        });
+                        // SAFETY: the faces cover the grid (checked above) and `kr` is a cell.
+                        unsafe {
+                            top.st.for_each_face_unchecked(kr, |l, c| {
+                                let sj = slot_of(l);
+                                if sj != NONE {
+                                    a += c * v_at(sj);
+                                }
+                            });
+                        }
                         u[r - r_lo] = a / top.st.d[kr];
                         r += 1;
                     }
                     let mut a = 0.0;
-                    top.st.for_each_face(k, |l, c| {
-                        let sj = self.cell_slot[l];
-                        if sj == NONE {
-                            return;
-                        }
-                        // A kept neighbour: the wrapped odd column's faces (A_BB).
-                        a += c * if sj & RED == 0 {
-                            v[sj as usize]
-                        } else {
-                            u[(sj & !RED) as usize - r_lo]
-                        };
-                    });
+                    // SAFETY: as above, `k` is a cell.
+                    unsafe {
+                        top.st.for_each_face_unchecked(k, |l, c| {
+                            let sj = slot_of(l);
+                            if sj == NONE {
+                                return;
+                            }
+                            // A kept neighbour: the wrapped odd column's faces (A_BB).
+                            a += c * if sj & RED == 0 {
+                                v_at(sj)
+                            } else {
+                                u[(sj & !RED) as usize - r_lo]
+                            };
+                        });
+                    }
                     *o = top.st.d[k] * v[s] - a;
                 }
             });
