@@ -379,7 +379,7 @@ pub(super) fn solve_multigrid(
 
 /// The refinement's inner solve on the multigrid: `A δ = r` reduced to the Schur complement
 /// `S` of the red unknowns (`S δ_B = s`, [`Multigrid::reduce`]), solved there by CG
-/// preconditioned with one V-cycle on `S`, with `S` applied in double precision from the
+/// preconditioned with one multigrid cycle on `S`, with `S` applied in double precision from the
 /// stencil, then `δ_R` from `δ_B` ([`Multigrid::extend`]). The same Krylov method as CG on
 /// `A` with the block preconditioner `L⁻ᵀ diag(D_R⁻¹, M_S) L⁻¹` (docs/flow.md), without
 /// the red half in its vectors and products. Without a reduction (the finest level is the

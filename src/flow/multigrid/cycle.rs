@@ -1,5 +1,6 @@
-//! The V-cycle (ℓ1 hybrid Gauss–Seidel smoothing) on the compressed levels, and the finest
-//! level's product from the grid stencil.
+//! The multigrid cycle (ℓ1 hybrid Gauss–Seidel smoothing; a W-cycle on the top levels, a
+//! V-cycle below) on the compressed levels, and the finest level's product from the grid
+//! stencil.
 
 use rayon::prelude::*;
 
@@ -39,17 +40,29 @@ impl Fine<'_> {
     }
 }
 
-/// One V-cycle on `levels[0]` for `b` into `x`; `bufs[0].r` is this level's scratch and
+/// The top levels whose coarse correction is two cycles of the level below, not one:
+/// `S` and the level below it (a W-cycle there, a V-cycle further down). On near-threshold
+/// contact gaps this took the CG iterations at 4097² from 51 to 23 (docs/flow.md).
+pub(super) const W_LEVELS: usize = 2;
+
+/// One cycle on `levels[0]` (the `depth`-th level below `S`, `S` being 0) for `b` into `x`:
+/// from `x = 0`, or from the `x` given when `warm` (then the result is
+/// `x + M (b − A x)`, the same cycle applied to the residual: the sweeps and the coarse
+/// correction are linear stationary steps). `bufs[0].r` is this level's scratch and
 /// `bufs[1..]` hold the vectors of the levels below.
-pub(super) fn vcycle(
+#[allow(clippy::too_many_arguments)]
+pub(super) fn level_cycle(
     levels: &[Graph],
     interps: &[Interp],
     b: &[f64],
     x: &mut [f64],
     bufs: &mut [Buffers],
     coarse: &DenseCholesky,
+    depth: usize,
+    warm: bool,
 ) {
     if levels.len() == 1 {
+        // Exact: the same from any start.
         coarse.solve(b, x);
         return;
     }
@@ -58,7 +71,9 @@ pub(super) fn vcycle(
     let ip = &interps[0];
     // `r` is the sweeps' scratch too: the residual is dead once restricted.
     let r = &mut here.r;
-    x.par_iter_mut().for_each(|v| *v = 0.0);
+    if !warm {
+        x.par_iter_mut().for_each(|v| *v = 0.0);
+    }
     g.smooth(b, x, r, false);
     g.residual(x, b, r);
     // The level below's right-hand side and solution, taken out of its buffers for the
@@ -85,7 +100,31 @@ pub(super) fn vcycle(
             *bv = s;
         }
     });
-    vcycle(&levels[1..], &interps[1..], &bc, &mut xc, rest, coarse);
+    // The coarse correction: one cycle from 0, and on the top levels a second one from its
+    // result (symmetric: two steps of an A-symmetric convergent iteration).
+    let below = &levels[1..];
+    level_cycle(
+        below,
+        &interps[1..],
+        &bc,
+        &mut xc,
+        rest,
+        coarse,
+        depth + 1,
+        false,
+    );
+    if depth < W_LEVELS {
+        level_cycle(
+            below,
+            &interps[1..],
+            &bc,
+            &mut xc,
+            rest,
+            coarse,
+            depth + 1,
+            true,
+        );
+    }
     let xcr = &xc;
     x.par_chunks_mut(CHUNK).enumerate().for_each(|(blk, xs)| {
         for (t, v) in xs.iter_mut().enumerate() {

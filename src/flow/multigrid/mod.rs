@@ -5,7 +5,7 @@
 //! The five-point stencil joins each cell only to cells of the other colour of a
 //! checkerboard, so the red half of the unknowns is eliminated exactly ([`reduce`]): the
 //! preconditioner is the block factorisation `L diag(D_R, S) Lᵀ` of the fine operator with
-//! the Schur complement `S` on the black half replaced by one V-cycle of the classical
+//! the Schur complement `S` on the black half replaced by one cycle of the classical
 //! multigrid below. Nothing of the finest level is smoothed or interpolated, and `S` is
 //! formed from the stencil directly; against a classical first coarsening (its splitting
 //! halved the unknowns too) this took the 4097² gap's multigrid from 42 to 39 CG iterations,
@@ -64,10 +64,14 @@
 //!
 //! # Cycle
 //!
-//! A V-cycle on `S`: one sweep of ℓ1 hybrid Gauss–Seidel before the coarse correction and one
-//! reversed sweep after it. Rows lie in fixed blocks of [`CHUNK`]: Gauss–Seidel inside a
-//! block, other blocks' values from before the sweep, and each row's divisor enlarged by the
-//! faces it has outside its block,
+//! A cycle on `S`: one sweep of ℓ1 hybrid Gauss–Seidel before the coarse correction and one
+//! reversed sweep after it. The coarse correction of `S` and of the level below it is two
+//! cycles of the next level (the second from the first's result), one further down: a
+//! W-cycle on the top levels, a V-cycle below ([`cycle::W_LEVELS`]). On near-threshold
+//! contact gaps the plain V-cycle left CG 36–51 iterations (1025² to 4097²) and this 21–23,
+//! for a cycle some 30 % dearer (docs/flow.md). Rows lie in fixed blocks of [`CHUNK`]:
+//! Gauss–Seidel inside a block, other blocks' values from before the sweep, and each row's
+//! divisor enlarged by the faces it has outside its block,
 //!
 //! ```text
 //! x_i ← x_i + (b_i − d_i x_i + Σ_j w_ij x_j) / (d_i + Σ_{j outside the block} |w_ij|),
@@ -75,7 +79,8 @@
 //!
 //! so the sweep is convergent however strongly the blocks are coupled (plain hybrid
 //! Gauss–Seidel, divisor `d_i`, needed 13 % more iterations than a sequential sweep; the
-//! ℓ1 divisor recovers them). The cycle is a symmetric positive definite operator and
+//! ℓ1 divisor recovers them). Two cycles in a row are two steps of an `A`-symmetric
+//! convergent iteration, so the cycle is a symmetric positive definite operator and
 //! conjugate gradients apply; the coarsest level (≤ [`COARSEST`] unknowns) is solved by a
 //! dense Cholesky factor. Block boundaries and every sum's order are fixed, so the bits do
 //! not depend on the thread count.
@@ -114,7 +119,7 @@ use coarsen::{split, strong, strongest};
 #[cfg(test)]
 use coarsen::{split_in_blocks, split_with, SPLIT_BLOCK};
 use coarsest::DenseCholesky;
-use cycle::{vcycle, Fine, SharedMut};
+use cycle::{level_cycle, Fine, SharedMut};
 use galerkin::galerkin;
 use interpolate::interpolation;
 use reduce::Reduction;
@@ -170,7 +175,7 @@ struct Buffers {
     r: Vec<f64>,
 }
 
-/// The multigrid hierarchy (one V-cycle per application).
+/// The multigrid hierarchy (one cycle per application).
 pub struct Multigrid {
     fine: Stencil,
     /// Grid cell of each fine unknown.
@@ -598,7 +603,7 @@ impl Multigrid {
         self.sizes().len()
     }
 
-    /// `z = M⁻¹ r` on the grid's cells (0 on cells without unknowns): one V-cycle from 0.
+    /// `z = M⁻¹ r` on the grid's cells (0 on cells without unknowns): one cycle from 0.
     #[cfg(test)]
     pub fn apply(&self, r: &[f64], z: &mut [f64]) {
         let mut zu = vec![0.0; self.n_unknowns()];
@@ -664,7 +669,7 @@ impl Multigrid {
             .residual_compensated_on(&self.cells, &self.index, parts, b, r, CHUNK);
     }
 
-    /// `z = M⁻¹ r` on the unknowns: the red unknowns eliminated, one V-cycle from 0 on
+    /// `z = M⁻¹ r` on the unknowns: the red unknowns eliminated, one cycle from 0 on
     /// their Schur complement ([`reduce`]); the dense factor when the finest level is the
     /// coarsest.
     pub fn precondition(&self, r: &[f64], z: &mut [f64]) {
@@ -709,9 +714,18 @@ impl Multigrid {
         }
     }
 
-    /// `z = M_S⁻¹ s`: one V-cycle from 0 on `S` (the multigrid below the reduction).
+    /// `z = M_S⁻¹ s`: one cycle from 0 on `S` (the multigrid below the reduction).
     pub fn cycle(&self, s: &[f64], z: &mut [f64]) {
         let mut bufs = self.bufs.lock().unwrap_or_else(|e| e.into_inner());
-        vcycle(&self.levels, &self.interps, s, z, &mut bufs, &self.coarse);
+        level_cycle(
+            &self.levels,
+            &self.interps,
+            s,
+            z,
+            &mut bufs,
+            &self.coarse,
+            0,
+            false,
+        );
     }
 }

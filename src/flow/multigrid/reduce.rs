@@ -10,9 +10,9 @@
 //! S = A_BB − W_BR D_R⁻¹ W_RB,
 //! ```
 //!
-//! with `D_R` diagonal. The preconditioner is `A⁻¹` with `S⁻¹` replaced by one V-cycle on
-//! `S` (`M_S`), `B = L⁻ᵀ diag(D_R⁻¹, M_S) L⁻¹`: symmetric positive definite whenever `M_S`
-//! is, and `κ(B A) = κ(M_S S)`. Applied to `r`:
+//! with `D_R` diagonal. The preconditioner is `A⁻¹` with `S⁻¹` replaced by one multigrid
+//! cycle on `S` (`M_S`), `B = L⁻ᵀ diag(D_R⁻¹, M_S) L⁻¹`: symmetric positive definite
+//! whenever `M_S` is, and `κ(B A) = κ(M_S S)`. Applied to `r`:
 //!
 //! ```text
 //! s_B = r_B + W_BR D_R⁻¹ r_R,   z_B = M_S s_B,   z_R = D_R⁻¹ (r_R + W_RB z_B),

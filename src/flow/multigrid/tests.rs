@@ -1,4 +1,4 @@
-use super::cycle::Fine;
+use super::cycle::{level_cycle, Fine, W_LEVELS};
 use super::*;
 use crate::flow::assemble::fine_stencil;
 use crate::flow::tests::lcg as uniform;
@@ -116,20 +116,67 @@ fn fine_rows_from_the_stencil_are_its_faces() {
 
 #[test]
 fn cycle_is_symmetric_and_positive() {
-    let (ny, nx) = (60, 50);
-    let mg = Multigrid::new(rough(7, ny, nx));
-    assert!(mg.n_levels() >= 2);
-    let n = ny * nx;
-    let u: Vec<f64> = uniform(1, n).iter().map(|v| v - 0.5).collect();
-    let v: Vec<f64> = uniform(2, n).iter().map(|v| v - 0.5).collect();
-    let (mut mu, mut mv) = (vec![0.0; n], vec![0.0; n]);
-    mg.apply(&u, &mut mu);
-    mg.apply(&v, &mut mv);
-    let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
-    let (a, b) = (dot(&u, &mv), dot(&v, &mu));
-    let scale = dot(&u, &u).sqrt() * dot(&mv, &mv).sqrt();
-    assert!((a - b).abs() <= 1e-12 * scale, "u·Mv = {a}, v·Mu = {b}");
-    assert!(dot(&u, &mu) > 0.0 && dot(&v, &mv) > 0.0);
+    // A small hierarchy, and one deeper than the levels cycled twice ([`W_LEVELS`]).
+    for (ny, nx, levels) in [(60, 50, 2), (200, 180, W_LEVELS + 3)] {
+        let mg = Multigrid::new(rough(7, ny, nx));
+        assert!(mg.n_levels() >= levels, "{} levels", mg.n_levels());
+        let n = ny * nx;
+        let u: Vec<f64> = uniform(1, n).iter().map(|v| v - 0.5).collect();
+        let v: Vec<f64> = uniform(2, n).iter().map(|v| v - 0.5).collect();
+        let (mut mu, mut mv) = (vec![0.0; n], vec![0.0; n]);
+        mg.apply(&u, &mut mu);
+        mg.apply(&v, &mut mv);
+        let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
+        let (a, b) = (dot(&u, &mv), dot(&v, &mu));
+        let scale = dot(&u, &u).sqrt() * dot(&mv, &mv).sqrt();
+        assert!(
+            (a - b).abs() <= 1e-12 * scale,
+            "{ny} × {nx}: u·Mv = {a}, v·Mu = {b}"
+        );
+        assert!(dot(&u, &mu) > 0.0 && dot(&v, &mv) > 0.0);
+    }
+}
+
+#[test]
+fn a_warm_cycle_corrects_by_the_residual() {
+    // From `x0`, a cycle gives `x0 + M (b − S x0)`, `M` the cycle from zero: what the
+    // second coarse correction of the top levels relies on. On the level below `S` (whose
+    // own coarse corrections are cycled twice) and on `S` itself.
+    let mg = Multigrid::new(rough(31, 200, 180));
+    assert!(
+        mg.levels.len() > W_LEVELS + 2,
+        "{} levels below the finest",
+        mg.levels.len()
+    );
+    let mut bufs = mg.bufs.lock().unwrap();
+    for depth in [1, 0] {
+        let (g, n) = (&mg.levels[depth], mg.levels[depth].n);
+        let b: Vec<f64> = uniform(32, n).iter().map(|u| u - 0.5).collect();
+        let x0: Vec<f64> = uniform(33, n).iter().map(|u| u - 0.5).collect();
+        let run = |bufs: &mut [Buffers], rhs: &[f64], x: &mut [f64], warm: bool| {
+            let (levels, interps) = (&mg.levels[depth..], &mg.interps[depth..]);
+            level_cycle(levels, interps, rhs, x, bufs, &mg.coarse, depth, warm);
+        };
+        // The level's own right-hand side and solution buffers are in use by the caller
+        // only; below it, the cycle's.
+        let mut warm = x0.clone();
+        run(&mut bufs[depth..], &b, &mut warm, true);
+        let mut r = vec![0.0; n];
+        g.residual(&x0, &b, &mut r);
+        let mut d = vec![0.0; n];
+        run(&mut bufs[depth..], &r, &mut d, false);
+        let want: Vec<f64> = x0.iter().zip(&d).map(|(x, d)| x + d).collect();
+        let scale = want.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        let worst = warm
+            .iter()
+            .zip(&want)
+            .fold(0.0f64, |m, (a, w)| m.max((a - w).abs()));
+        assert!(scale.is_finite() && scale > 0.0);
+        assert!(
+            worst <= 1e-12 * scale,
+            "depth {depth}: {worst:e} off ({scale:e})"
+        );
+    }
 }
 
 #[test]
