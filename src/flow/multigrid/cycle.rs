@@ -102,28 +102,10 @@ pub(super) fn level_cycle(
     });
     // The coarse correction: one cycle from 0, and on the top levels a second one from its
     // result (symmetric: two steps of an A-symmetric convergent iteration).
-    let below = &levels[1..];
-    level_cycle(
-        below,
-        &interps[1..],
-        &bc,
-        &mut xc,
-        rest,
-        coarse,
-        depth + 1,
-        false,
-    );
-    if depth < W_LEVELS {
-        level_cycle(
-            below,
-            &interps[1..],
-            &bc,
-            &mut xc,
-            rest,
-            coarse,
-            depth + 1,
-            true,
-        );
+    let cycles = if depth < W_LEVELS { 2 } else { 1 };
+    for k in 0..cycles {
+        let (below, down) = (&levels[1..], &interps[1..]);
+        level_cycle(below, down, &bc, &mut xc, rest, coarse, depth + 1, k > 0);
     }
     let xcr = &xc;
     x.par_chunks_mut(CHUNK).enumerate().for_each(|(blk, xs)| {
