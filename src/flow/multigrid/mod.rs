@@ -69,9 +69,9 @@
 //! cycles of the next level (the second from the first's result), one further down: a
 //! W-cycle on the top levels, a V-cycle below ([`cycle::W_LEVELS`]). On near-threshold
 //! contact gaps the plain V-cycle left CG 36–51 iterations (1025² to 4097²) and this 21–23,
-//! for a cycle some 30 % dearer (docs/flow.md). Rows lie in fixed blocks of [`CHUNK`]:
-//! Gauss–Seidel inside a block, other blocks' values from before the sweep, and each row's
-//! divisor enlarged by the faces it has outside its block,
+//! for a cycle some 65 % dearer (0.33 s against 0.20 s at 4097², docs/flow.md). Rows lie
+//! in fixed blocks of [`CHUNK`]: Gauss–Seidel inside a block, other blocks' values from
+//! before the sweep, and each row's divisor enlarged by the faces it has outside its block,
 //!
 //! ```text
 //! x_i ← x_i + (b_i − d_i x_i + Σ_j w_ij x_j) / (d_i + Σ_{j outside the block} |w_ij|),
