@@ -146,8 +146,9 @@ impl Stencil {
         self.e.len() == n && self.s.len() == n
     }
 
-    /// [`Stencil::for_each_face`] without bounds checks, for the loops that are bound by the
-    /// instructions they execute (the multigrid's product with its Schur complement).
+    /// [`Stencil::for_each_face`] without bounds checks, for a loop over many cells that
+    /// checks [`Stencil::faces_complete`] once (the multigrid's product with its Schur
+    /// complement).
     ///
     /// # Safety
     ///

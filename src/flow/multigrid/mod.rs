@@ -246,8 +246,8 @@ impl Graph {
     /// last and the divisor is applied as its reciprocal: the only dependence from one row
     /// to the next is then one multiply-add and one multiply, not the whole row's sum and a
     /// division. The loops index without bounds checks (what they rely on is checked once
-    /// per level by `check_rows`, and the vectors' lengths here): they are bound by the
-    /// instructions they execute, and a check per column, weight and value doubled them.
+    /// per level by `check_rows`, and the vectors' lengths here), which would otherwise add
+    /// a compare and a branch to every read of a column, a weight and a value.
     fn smooth(&self, b: &[f64], x: &mut [f64], old: &mut [f64], reverse: bool) {
         self.check_vectors(&[&*x, b, &*old]);
         old.copy_from_slice(x);
