@@ -101,10 +101,15 @@ pub(super) fn level_cycle(
         }
     });
     // The coarse correction: one cycle from 0, and on the top levels a second one from its
-    // result (symmetric: two steps of an A-symmetric convergent iteration).
-    let cycles = if depth < W_LEVELS { 2 } else { 1 };
+    // result (symmetric: two steps of an A-symmetric convergent iteration); not when the
+    // level below is the coarsest, whose exact solve a second one would only repeat.
+    let (below, down) = (&levels[1..], &interps[1..]);
+    let cycles = if depth < W_LEVELS && below.len() > 1 {
+        2
+    } else {
+        1
+    };
     for k in 0..cycles {
-        let (below, down) = (&levels[1..], &interps[1..]);
         level_cycle(below, down, &bc, &mut xc, rest, coarse, depth + 1, k > 0);
     }
     let xcr = &xc;

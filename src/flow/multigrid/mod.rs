@@ -268,9 +268,10 @@ impl Graph {
                     for p in *self.ptr.get_unchecked(i)..*self.ptr.get_unchecked(i + 1) {
                         let j = *self.col.get_unchecked(p) as usize;
                         let w = f64::from(*self.w.get_unchecked(p));
-                        if j == prev && j >= i0 && j < i1 {
+                        let inside = j >= i0 && j < i1;
+                        if inside && j == prev {
                             w_prev = w;
-                        } else if j >= i0 && j < i1 {
+                        } else if inside {
                             v += w * xc.get_unchecked(j - i0);
                         } else {
                             out += w.abs();

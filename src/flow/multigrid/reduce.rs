@@ -256,6 +256,7 @@ impl Reduction {
                         unsafe {
                             top.st.for_each_face_unchecked(kr, |l, c| {
                                 let sj = slot_of(l);
+                                debug_assert!(sj == NONE || sj & RED == 0, "red cells adjacent");
                                 if sj != NONE {
                                     a += c * v_at(sj);
                                 }
