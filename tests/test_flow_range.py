@@ -26,7 +26,7 @@ import pytest
 from test_flow import _reference
 
 import leakpath
-from leakpath._flow import ROUND_OFF
+from leakpath._flow import GAP_FLOOR, ROUND_OFF, _prepare_gaps
 from leakpath.errors import InvalidArgumentError, NotConvergedError
 
 REL = 1e-11
@@ -221,6 +221,45 @@ def test_clearly_negative_gaps_are_still_refused():
     gap[1, 2] = -1e-12  # within the round-off band: contact
     f = leakpath.flow(gap, dx=1.0)
     assert np.isnan(f.pressure[1, 2]) and f.flow_rate > 0
+
+
+def _prepared_by_definition(gap, contact):
+    """docs/flow.md "Supported range of gaps", cell by cell: the largest free gap ``g_max``
+    (0 when none is positive); a free gap below ``−ROUND_OFF·g_max`` refused (``None``); free
+    gaps in ``[−ROUND_OFF·g_max, 0)`` set to 0, free gaps in ``(0, GAP_FLOOR·g_max)`` raised
+    to ``GAP_FLOOR·g_max``; contact cells as given."""
+    free = [(i, j) for i in range(gap.shape[0]) for j in range(gap.shape[1])
+            if contact is None or not contact[i, j]]
+    gmax = max([0.0] + [float(gap[c]) for c in free])
+    out = gap.copy()
+    for c in free:
+        v = float(gap[c])
+        if v < -ROUND_OFF * gmax:
+            return None
+        if v < 0:
+            out[c] = 0.0
+        elif 0 < v < GAP_FLOOR * gmax:
+            out[c] = GAP_FLOOR * gmax
+    return out
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_gap_preparation_follows_its_definition(seed):
+    # Random fields mixing contact cells (of any gap), zeros, the round-off band on both
+    # sides of its edge, gaps below the floor, and ordinary gaps.
+    rng = np.random.default_rng(seed)
+    shape = (int(rng.integers(1, 7)), int(rng.integers(1, 7)))
+    gap = rng.choice([0.0, 1.0, 2.5, -5e-10, -2e-9, 1e-60, 3e-51, -0.5], size=shape)
+    gap = gap * rng.uniform(0.5, 2.0)
+    contact = None if seed % 3 == 0 else rng.random(shape) < 0.4
+    want = _prepared_by_definition(gap, contact)
+    if want is None:
+        with pytest.raises(InvalidArgumentError, match="negative on a free cell") as e:
+            _prepare_gaps(gap, contact)
+        assert e.value.argument == "gap"
+    else:
+        got = _prepare_gaps(gap, contact)
+        np.testing.assert_array_equal(got, want)
 
 
 def _plates(ny: int, nx: int, g: float, eta: float, dp: float) -> float:
