@@ -266,6 +266,7 @@ class ContactProblem:
         precondition: bool = True,
         coarse_start: bool = True,
         chord_steps: bool = True,
+        rescaled_steps: bool = True,
         hardness: float | None = None,
         single_precision_above: float = 1e-4,
     ) -> ContactSolution:
@@ -288,14 +289,17 @@ class ContactProblem:
         (max h − h + u)``. ``tol``: stop when the KKT certificate
         ``max(−min g, max_{p>0} |g|, Σ p|g| / Σ p) / (max h − min h)`` is ``≤ tol``.
         ``max_iter``: default ``max(5000, ⌈100·N^¼⌉)`` (Polonsky–Keer), ``50 N + 1000``
-        (exact solvers); exceeding it raises ``RuntimeError``. Three settings tune
+        (exact solvers); exceeding it raises ``RuntimeError``. Four settings tune
         Polonsky–Keer and leave the answer the same minimiser: ``precondition`` (conjugate
         steps preconditioned with the inverse half-space compliance ``E*|q|/2`` on the
         contact set), ``coarse_start`` (a cold solve on a grid of at least 64 points per side
         starts from the solution on the grid coarsened by two, at most two levels deep, to KKT
-        ``1e-2``, prolonged bilinearly) and ``chord_steps`` (while an
-        iteration truncates or adds more than 0.5 % of the contact set, the next one is a
-        chord step with one FFT product of the whole change and an exact line search).
+        ``1e-2``, prolonged bilinearly), ``chord_steps`` (while an
+        iteration truncates or adds more than 2 % of the contact set, the next one is a
+        chord step with one FFT product of the whole change and an exact line search) and
+        ``rescaled_steps`` (displacement control from a start with pressure, coarse or the
+        caller's: each step is taken as under load control at the current load, then ``p``
+        is scaled so that the gap at the imposed ``Δ`` has zero mean over the contact set).
         ``single_precision_above``: while the certificate is above this level the FFT
         products are made in single precision (relative error ~1e-7); below it the full
         products ``u = C p`` are double precision (at the switch, at every hundredfold fall

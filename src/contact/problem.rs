@@ -172,6 +172,12 @@ pub struct Options<'a> {
     /// Take chord steps while the contact set changes wholesale (both controls, see
     /// the module documentation); `false` keeps every iteration a regular Polonsky–Keer step.
     pub chord_steps: bool,
+    /// Displacement control from a start with pressure (the coarse start's or a caller's):
+    /// take each step as under load control at the current load `Σ p`, then scale `p` so
+    /// that the gap at the imposed approach has zero mean over the contact set
+    /// ([`crate::contact::polonsky_keer`], "Rescaled load steps"); `false` keeps the plain
+    /// displacement-controlled steps.
+    pub rescaled_steps: bool,
     /// Hardness `H`: cap the pressure at `p ≤ H` (elastic–perfectly-plastic contact, solved by
     /// [`crate::contact::capped`]). `None` or `+∞`: the elastic problem, by the
     /// Polonsky–Keer iteration unchanged. Polonsky–Keer only ([`Solver::resolve`]).
@@ -196,6 +202,7 @@ impl Default for Options<'_> {
             precondition: true,
             coarse_start: true,
             chord_steps: true,
+            rescaled_steps: true,
             hardness: None,
             single_precision_above: DEFAULT_SINGLE_PRECISION_ABOVE,
         }

@@ -265,7 +265,7 @@ impl ContactProblem {
     /// Solve at `approach` or at `mean_pressure` (exactly one) with `solver` ("auto",
     /// "polonsky-keer", "active-set", "lawson-hanson"). `start`: "cold" (p = 0), "previous"
     /// (this problem's last solve), "pressure" with `initial_pressure` or "set" with
-    /// `contact_set` (flat indices). `precondition`, `coarse_start`, `chord_steps` tune
+    /// `contact_set` (flat indices). `precondition`, `coarse_start`, `chord_steps`, `rescaled_steps` tune
     /// Polonsky–Keer (see `contact::Options`), as does `single_precision_above` (the
     /// certificate above which all its FFT products are made in f32, below which only the
     /// increments `C t`, `C d`; 0: f64 throughout); the
@@ -274,7 +274,7 @@ impl ContactProblem {
     #[pyo3(signature = (
         approach=None, mean_pressure=None, solver="auto", start="cold",
         initial_pressure=None, contact_set=None, tol=1e-12, max_iter=None, threads=None,
-        precondition=true, coarse_start=true, chord_steps=true, hardness=None,
+        precondition=true, coarse_start=true, chord_steps=true, rescaled_steps=true, hardness=None,
         single_precision_above=crate::contact::problem::DEFAULT_SINGLE_PRECISION_ABOVE
     ))]
     #[allow(clippy::too_many_arguments)]
@@ -293,6 +293,7 @@ impl ContactProblem {
         precondition: bool,
         coarse_start: bool,
         chord_steps: bool,
+        rescaled_steps: bool,
         hardness: Option<f64>,
         single_precision_above: f64,
     ) -> PyResult<PySolution> {
@@ -396,6 +397,7 @@ impl ContactProblem {
                 precondition,
                 coarse_start,
                 chord_steps,
+                rescaled_steps,
                 hardness,
                 single_precision_above,
                 ..Options::default()

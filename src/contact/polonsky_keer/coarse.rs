@@ -152,6 +152,7 @@ pub fn start(
         precondition: opts.precondition,
         coarse_start: true,
         chord_steps: opts.chord_steps,
+        rescaled_steps: opts.rescaled_steps,
         hardness: opts.hardness,
         single_precision_above: opts.single_precision_above,
     };

@@ -20,6 +20,22 @@ fn scale_to_load(w: &mut Work<'_>, target: f64, now: Acc) -> (f64, Acc) {
     (delta, w.gap_pass(delta, Some(k)))
 }
 
+/// Rescaled load steps (module documentation): the state scaled to the imposed approach
+/// `delta` by [`Work::rescale`], or `None` with nothing changed when the steps are the plain
+/// ones (`rescaled` false) or `k` is not usable, which ends the rescaled steps for this solve
+/// (and the conjugate sequence, `cg`).
+fn rescale_state(w: &mut Work<'_>, delta: f64, rescaled: &mut bool, cg: &mut bool) -> Option<Acc> {
+    if !*rescaled {
+        return None;
+    }
+    let next = w.rescale(delta);
+    if next.is_none() {
+        *rescaled = false;
+        *cg = false;
+    }
+    next
+}
+
 /// Deterministic `(max, min, Σ)` of the heights.
 pub(crate) fn height_stats(h: &[f64]) -> (f64, f64, f64) {
     let parts: Vec<(f64, f64, f64)> = h
@@ -122,6 +138,14 @@ pub(super) fn run(
         }
     };
     let max_iter = opts.max_iter.unwrap_or_else(|| default_max_iter(n));
+    // Displacement control from a start with pressure (the coarse start's or a caller's)
+    // takes rescaled load steps (module documentation).
+    let start_loaded = start
+        .as_deref()
+        .or(initial)
+        .is_some_and(|p0| p0.par_iter().any(|&v| v > 0.0));
+    let mut rescaled =
+        opts.rescaled_steps && matches!(mode, Mode::Displacement(_)) && !at_limit && start_loaded;
 
     let n_chunks = n.div_ceil(CHUNK);
     let sparse_max = sparse_limit(op.boundary);
@@ -201,14 +225,19 @@ pub(super) fn run(
     if any_p {
         w.refresh_u();
     }
+    let mut cg = false; // the paper's δ
     let (mut state, mut delta) = w.evaluate(mode);
+    // After a rescale `u = C p` (kept in `r`) is no longer fresh.
     let mut fresh = true;
+    if let Some(next) = rescale_state(&mut w, delta, &mut rescaled, &mut cg) {
+        state = next;
+        fresh = false;
+    }
     // Below the switch level the increments C t stay in f32 and u = C p is refreshed in f64
     // each time the certificate has fallen REFRESH_RATIO below its value at the last refresh.
     let mut refreshed_at = f64::INFINITY;
 
     let mut it = 0usize;
-    let mut cg = false; // the paper's δ
     let mut g_old = 1.0;
     // The last step was a preconditioned one (its `G = Σ g z` is what β continues from).
     let mut last_pre = false;
@@ -246,6 +275,13 @@ pub(super) fn run(
             w.refresh_u();
             (state, delta) = w.evaluate(mode);
             fresh = true;
+            // Not on the confirming product: the returned `u` must be `C p` of the answer.
+            if !converged {
+                if let Some(next) = rescale_state(&mut w, delta, &mut rescaled, &mut cg) {
+                    state = next;
+                    fresh = false;
+                }
+            }
             refreshed_at = state.certificate() / scale_at(delta);
             continue;
         }
@@ -323,6 +359,9 @@ pub(super) fn run(
             if tau0.is_finite() && tau0 > 0.0 {
                 let tau_ol0 = if preconditioned { tau0 / c00 } else { tau0 };
                 let trial = match mode {
+                    // Rescaled load steps: the trial keeps the current load, as under load
+                    // control; the rescale after the step moves it.
+                    Mode::Displacement(_) if rescaled => w.chord_load(tau0, tau_ol0, state.sum_p),
                     Mode::Displacement(_) => w.chord(tau0, tau_ol0),
                     Mode::Load(target) => w.chord_load(tau0, tau_ol0, target),
                 };
@@ -335,7 +374,10 @@ pub(super) fn run(
                         1.0
                     };
                     state = match mode {
-                        Mode::Displacement(_) => w.chord_update(s),
+                        Mode::Displacement(_) => {
+                            let next = w.chord_update(s);
+                            rescale_state(&mut w, delta, &mut rescaled, &mut cg).unwrap_or(next)
+                        }
                         Mode::Load(target) => {
                             // Σ d = 0: the new p keeps the load up to round-off, which the
                             // rescale of step 7 removes.
@@ -374,10 +416,10 @@ pub(super) fn run(
 
         // Steps 3–4.
         w.product_t();
-        let curv = w.curvature(steepest, matches!(mode, Mode::Load(_)));
+        let curv = w.curvature(steepest, rescaled || matches!(mode, Mode::Load(_)));
         let denom = match mode {
-            Mode::Displacement(_) => curv.rt,
-            Mode::Load(_) => curv.rt - curv.rw / dir.n_w.max(1) as f64 * dir.st,
+            Mode::Displacement(_) if !rescaled => curv.rt,
+            _ => curv.rt - curv.rw / dir.n_w.max(1) as f64 * dir.st,
         };
         let mut tau = dir.gt / denom;
         if !positive(denom) || !tau.is_finite() {
@@ -434,7 +476,7 @@ pub(super) fn run(
         match mode {
             Mode::Displacement(_) if consistent => {
                 fresh = false;
-                state = now;
+                state = rescale_state(&mut w, delta, &mut rescaled, &mut cg).unwrap_or(now);
             }
             Mode::Load(target) if consistent && now.n_c > 0 => {
                 fresh = false;
@@ -453,6 +495,10 @@ pub(super) fn run(
                 w.refresh_u();
                 (state, delta) = w.evaluate(mode);
                 fresh = true;
+                if let Some(next) = rescale_state(&mut w, delta, &mut rescaled, &mut cg) {
+                    state = next;
+                    fresh = false;
+                }
             }
         }
     }

@@ -399,6 +399,55 @@ impl Work<'_> {
         combine(&self.parts)
     }
 
+    /// Rescaled load steps (module documentation): `p ← k p` with
+    /// `k = (N_c Δ − Σ_{I_c} (max h − h)) / Σ_{I_c} u`, and the gap at the same `Δ` with it,
+    /// `g ← g + (k − 1) u`, where `u = g − (max h − Δ) + h` is read back from the gap (no `u`
+    /// field is kept). The scaled gap has zero mean over `I_c`. Returns the reductions of the
+    /// new state, or `None` (nothing changed) when `k` is not usable: no contact,
+    /// `Σ_{I_c} u ≤ 0`, or `k ≤ 0`.
+    pub(super) fn rescale(&mut self, delta: f64) -> Option<Acc> {
+        let (h, hmax) = (self.h, self.hmax);
+        let top = hmax - delta;
+        let Work { p, g, parts, .. } = self;
+        // Σ_{I_c} (max h − h) in `sh`, Σ_{I_c} u in `su`.
+        parts
+            .par_iter_mut()
+            .zip(p.par_chunks(CHUNK))
+            .zip(g.par_chunks(CHUNK))
+            .enumerate()
+            .for_each(|(c, ((acc, pc), gc))| {
+                let hc = &h[c * CHUNK..c * CHUNK + pc.len()];
+                let mut a = Acc::ZERO;
+                for i in 0..pc.len() {
+                    a.observe_load(pc[i], hmax - hc[i], gc[i] - top + hc[i]);
+                }
+                *acc = a;
+            });
+        let now = combine(parts);
+        let k = (delta * now.n_c as f64 - now.sh) / now.su;
+        if !(now.n_c > 0 && now.su > 0.0 && k.is_finite() && k > 0.0) {
+            return None;
+        }
+        parts
+            .par_iter_mut()
+            .zip(p.par_chunks_mut(CHUNK))
+            .zip(g.par_chunks_mut(CHUNK))
+            .enumerate()
+            .for_each(|(c, ((acc, pc), gc))| {
+                let hc = &h[c * CHUNK..c * CHUNK + pc.len()];
+                let mut a = Acc::ZERO;
+                for i in 0..pc.len() {
+                    let gi = gc[i] + (k - 1.0) * (gc[i] - top + hc[i]);
+                    let pi = k * pc[i];
+                    gc[i] = gi;
+                    pc[i] = pi;
+                    a.observe(pi, gi);
+                }
+                *acc = a;
+            });
+        Some(combine(parts))
+    }
+
     /// Step 1 from a fresh `u`: the gap (load control: with `Δ` from the mean over `I_c`).
     /// Returns the reductions and the approach.
     pub(super) fn evaluate(&mut self, mode: Mode) -> (Acc, f64) {

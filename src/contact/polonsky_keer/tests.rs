@@ -240,6 +240,99 @@ fn chord_steps_reach_the_exact_minimiser() {
 }
 
 #[test]
+fn rescaled_load_steps_reach_the_exact_minimiser() {
+    // Displacement control from a start with pressure takes load-controlled steps and scales
+    // `p` to the imposed approach after each: the answer must still be the exact minimiser
+    // at that approach (dense projected Gauss–Seidel and Cholesky on its contact set), with
+    // the approach reported exactly as given. Warm starts of too little and too much load
+    // and the wrong shape, preconditioned or not, and the plain steps from the same start.
+    let (ny, nx) = (24usize, 24usize);
+    let n = ny * nx;
+    for seed in [7u64, 8] {
+        let h = rough(ny, nx, seed);
+        let pr = problem(&h, ny, nx, Boundary::Free);
+        let ker = Kernel::new(ny, nx, pr.dx, pr.e_star);
+        let c: Vec<f64> = (0..n * n).map(|k| ker.coeff(k / n, k % n)).collect();
+        let (hmax, hmin, _) = height_stats(&h);
+        for frac in [0.2, 0.5, 0.9] {
+            let delta = frac * (hmax - hmin);
+            let b: Vec<f64> = h.iter().map(|&v| delta - (hmax - v)).collect();
+            let exact = dense_reference(&c, &b);
+            let ce: Vec<bool> = exact.iter().map(|&p| p > 0.0).collect();
+            let pmax = exact.iter().cloned().fold(0.0, f64::max);
+            let w = lcg(seed + 100, n);
+            for scale in [0.5, 1.7] {
+                let p0: Vec<f64> = exact
+                    .iter()
+                    .zip(&w)
+                    .map(|(&p, &r)| scale * (p + 0.2 * r * pmax))
+                    .collect();
+                for precondition in [true, false] {
+                    let o = Options {
+                        precondition,
+                        ..opts(1e-12)
+                    };
+                    let what = format!("seed {seed} Δ*={frac} start ×{scale} pre {precondition}");
+                    let s = solve(&pr, Control::Approach(delta), &o, Some(&p0))
+                        .unwrap_or_else(|e| panic!("{what}: {e:?}"));
+                    assert_eq!(s.approach, delta, "{what}");
+                    assert!(s.kkt <= 1e-12, "{what}: kkt {}", s.kkt);
+                    let e = max_rel(&s.pressure, &exact);
+                    assert!(e < 1e-8, "{what}: rel err {e}");
+                    let cs: Vec<bool> = s.pressure.iter().map(|&p| p > 0.0).collect();
+                    assert_eq!(cs, ce, "{what}");
+                    let plain = Options {
+                        rescaled_steps: false,
+                        ..o
+                    };
+                    let r = solve(&pr, Control::Approach(delta), &plain, Some(&p0)).unwrap();
+                    let e = max_rel(&r.pressure, &exact);
+                    assert!(e < 1e-8, "{what}: plain steps, rel err {e}");
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn rescaled_load_steps_from_the_coarse_start() {
+    // On grids with a coarse start (≥ 64 points a side) every cold displacement solve takes
+    // rescaled load steps: the same minimiser as the plain steps, found independently.
+    let (ny, nx) = (80usize, 72usize);
+    for seed in [3u64, 4] {
+        let h = rough(ny, nx, seed);
+        for boundary in [Boundary::Free, Boundary::Periodic] {
+            let pr = problem(&h, ny, nx, boundary);
+            let (hmax, hmin, hsum) = height_stats(&h);
+            let top = match boundary {
+                Boundary::Free => hmax - hmin,
+                Boundary::Periodic => hmax - hsum / (ny * nx) as f64,
+            };
+            for frac in [0.1, 0.4, 0.8] {
+                let delta = frac * top;
+                let s = solve(&pr, Control::Approach(delta), &opts(1e-12), None).unwrap();
+                let plain = Options {
+                    rescaled_steps: false,
+                    ..opts(1e-12)
+                };
+                let r = solve(&pr, Control::Approach(delta), &plain, None).unwrap();
+                let what = format!("{boundary:?} seed {seed} Δ*={frac}");
+                assert_eq!(s.approach, delta, "{what}");
+                assert!(s.kkt <= 1e-12 && r.kkt <= 1e-12, "{what}");
+                let cs: Vec<bool> = s.pressure.iter().map(|&p| p > 0.0).collect();
+                let cr: Vec<bool> = r.pressure.iter().map(|&p| p > 0.0).collect();
+                assert_eq!(cs, cr, "{what}");
+                let e = max_rel(&s.pressure, &r.pressure);
+                assert!(e < 1e-8, "{what}: rel diff {e}");
+                // The certificate recomputed from the returned fields.
+                let k = kkt_certificate(&s.pressure, &s.gap, (hmax - hmin).max(delta));
+                assert!(k <= 1.001e-12, "{what}: kkt {k}");
+            }
+        }
+    }
+}
+
+#[test]
 fn preconditioned_and_plain_reach_the_same_minimiser() {
     // Larger than the dense tests, so the preconditioned conjugate steps run for many
     // iterations; both iterations must land on the same contact set and pressures.
