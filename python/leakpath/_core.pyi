@@ -297,9 +297,10 @@ class ContactProblem:
         ``1e-2``, prolonged bilinearly), ``chord_steps`` (while an
         iteration truncates or adds more than 2 % of the contact set, the next one is a
         chord step with one FFT product of the whole change and an exact line search) and
-        ``rescaled_steps`` (displacement control from a start with pressure, coarse or the
-        caller's: each step is taken as under load control at the current load, then ``p``
-        is scaled so that the gap at the imposed ``Δ`` has zero mean over the contact set).
+        ``rescaled_steps`` (displacement control of a free surface from a start with
+        pressure, coarse or the caller's: each step is taken as under load control at the
+        current load, then ``p`` is scaled so that the gap at the imposed ``Δ`` has zero mean
+        over the contact set; periodic surfaces always take the plain steps).
         ``single_precision_above``: while the certificate is above this level the FFT
         products are made in single precision (relative error ~1e-7); below it the full
         products ``u = C p`` are double precision (at the switch, at every hundredfold fall

@@ -172,11 +172,11 @@ pub struct Options<'a> {
     /// Take chord steps while the contact set changes wholesale (both controls, see
     /// the module documentation); `false` keeps every iteration a regular Polonsky–Keer step.
     pub chord_steps: bool,
-    /// Displacement control from a start with pressure (the coarse start's or a caller's):
-    /// take each step as under load control at the current load `Σ p`, then scale `p` so
-    /// that the gap at the imposed approach has zero mean over the contact set
+    /// Displacement control of a free surface from a start with pressure (the coarse start's
+    /// or a caller's): take each step as under load control at the current load `Σ p`, then
+    /// scale `p` so that the gap at the imposed approach has zero mean over the contact set
     /// ([`crate::contact::polonsky_keer`], "Rescaled load steps"); `false` keeps the plain
-    /// displacement-controlled steps.
+    /// displacement-controlled steps. Periodic surfaces always take the plain steps.
     pub rescaled_steps: bool,
     /// Hardness `H`: cap the pressure at `p ≤ H` (elastic–perfectly-plastic contact, solved by
     /// [`crate::contact::capped`]). `None` or `+∞`: the elastic problem, by the

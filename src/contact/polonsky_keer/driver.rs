@@ -138,14 +138,15 @@ pub(super) fn run(
         }
     };
     let max_iter = opts.max_iter.unwrap_or_else(|| default_max_iter(n));
-    // Displacement control from a start with pressure (the coarse start's or a caller's)
-    // takes rescaled load steps (module documentation).
+    // Displacement control of a free surface from a start with pressure (the coarse start's
+    // or a caller's) takes rescaled load steps (module documentation; on periodic surfaces
+    // they did not pay).
     let start_loaded = start
         .as_deref()
         .or(initial)
         .is_some_and(|p0| p0.par_iter().any(|&v| v > 0.0));
     let mut rescaled =
-        opts.rescaled_steps && matches!(mode, Mode::Displacement(_)) && !at_limit && start_loaded;
+        opts.rescaled_steps && matches!(mode, Mode::Displacement(_)) && !periodic && start_loaded;
 
     let n_chunks = n.div_ceil(CHUNK);
     let sparse_max = sparse_limit(op.boundary);

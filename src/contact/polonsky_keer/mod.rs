@@ -142,8 +142,8 @@
 //! (step 3), and step 7 rescales `p`. The uniform mode on a scattered contact set is what
 //! the preconditioner `E*|q|/2`, made for the whole plane, gets least right, and load control
 //! never has to find it by iterating. With [`Options::rescaled_steps`] (the default) a
-//! displacement-controlled solve that starts from a pressure (the coarse start's, or a
-//! caller's warm start) takes load control's steps at the load of its current iterate: the
+//! displacement-controlled solve of a free surface that starts from a pressure (the coarse
+//! start's, or a caller's warm start) takes load control's steps at the load of its current iterate: the
 //! line search of step 4 with the mean of `r` over the working set removed, and chord trials
 //! scaled to the current load (`Σ d = 0`). After each step `p` is scaled by
 //!
@@ -164,8 +164,14 @@
 //! iterate (no contact, `Σ_{I_c} u ≤ 0`, or `k ≤ 0`). `k ≤ 0` means the set holds points
 //! the flat at `Δ` does not reach even undeformed, as a start with pressure everywhere does
 //! at a light load. From `p = 0` (no coarse start: fewer than [`COARSE_START_MIN_SIDE`]
-//! points a side) and at the full-contact limit of a periodic surface the steps are the plain
-//! ones. Every step must be rescaled, including those after a fresh product: with one
+//! points a side) the steps are the plain ones.
+//!
+//! Periodic surfaces keep the plain steps. Measured on periodic RMD surfaces (same settings,
+//! `Δ` = 0.1/0.3 of the height range, medians of 3), the rescaled steps took 34.7/68.4 FFT
+//! products against 35.4/77.4 at 1025², but 48.4/110.6 against 46.4/102.1 at 2049². A
+//! threshold search at 1025² (14 warm-started solves near 46 % contact,
+//! `benchmarks/threshold_speed.py`) took the same 507–509 iterations with them and 10–15 %
+//! more time, for the two rescale passes. Every step must be rescaled, including those after a fresh product: with one
 //! rescale missed after each wholesale change (those iterations refresh `u`), the load
 //! wandered and a 1025², `Δ` = 0.6 h_s solve took 1566 iterations.
 //!
