@@ -8,9 +8,16 @@ approach ``Δ = f · h_s`` (``f`` from ``--deltas``; ``h_s`` from ``--hs``: ``ra
 default, is leakpath's height range ``max h − min h`` (docs/conventions.md), ``rms`` the rms
 height, about a sixth of it on these surfaces, so the same ``f`` is a much lighter load):
 
-* displacement control at ``Δ``;
+* displacement control at ``Δ`` (``displacement``: the default, rescaled load steps from the
+  coarse start; ``plain``: ``rescaled_steps=False``, the plain displacement-controlled steps,
+  docs/conventions.md "Rescaled load steps");
 * load control at the mean pressure ``p̄`` the displacement solve returned (the same contact
   state), so the two times compare like for like.
+
+With ``--fft-reference`` each worker also times numpy's ``rfft2`` + ``irfft2`` of a real field
+on the fine product's FFT grid (``2n − 2`` per side free, ``n`` periodic; median of 5, after
+the solves and the peak-memory reading) and reports the solve's median time in those round
+trips.
 
 Every (size, Δ, control) runs in a fresh Python process (its peak RSS is that solve's, plus the
 surface and the problem); the time is the median of ``--repeats`` solves on one problem
@@ -65,6 +72,7 @@ def worker(
     tol: float,
     hs_kind: str,
     boundary: str = "free",
+    fft_reference: bool = False,
 ) -> dict:
     import leakpath
     from leakpath import _core
@@ -81,8 +89,13 @@ def worker(
     out = None
     for _ in range(repeats):
         t0 = time.perf_counter()
-        if control == "displacement":
-            out = prob.solve(approach=frac * hs, solver="polonsky-keer", tol=tol)
+        if control in ("displacement", "plain"):
+            out = prob.solve(
+                approach=frac * hs,
+                solver="polonsky-keer",
+                tol=tol,
+                rescaled_steps=control == "displacement",
+            )
         else:
             out = prob.solve(mean_pressure=pbar, solver="polonsky-keer", tol=tol)
         times.append(time.perf_counter() - t0)
@@ -90,6 +103,16 @@ def worker(
     rss_kib = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     fft_side = 2 * n - 2 if boundary == "free" else n
     pre_total = out.preconditioner_products + out.coarse.preconditioner_products_fine_equivalent
+    round_trip = None
+    if fft_reference:
+        field = np.random.default_rng(0).standard_normal((fft_side, fft_side))
+        trips = []
+        for _ in range(5):
+            t0 = time.perf_counter()
+            np.fft.irfft2(np.fft.rfft2(field), s=field.shape)
+            trips.append(time.perf_counter() - t0)
+        round_trip = statistics.median(trips)
+        del field
     return {
         "size": n,
         "boundary": boundary,
@@ -111,6 +134,10 @@ def worker(
         "approach_over_hs": out.approach / hs,
         "kkt": out.kkt,
         "peak_rss_gib": rss_kib / 2**20,
+        "numpy_round_trip_s": round_trip,
+        "solve_in_round_trips": None
+        if round_trip is None
+        else statistics.median(times) / round_trip,
     }
 
 
@@ -132,7 +159,19 @@ def run_one(args, n: int, frac: float, control: str, pbar: float | None) -> dict
         sys.executable,
         __file__,
         "--worker",
-        json.dumps([n, frac, control, pbar, args.repeats, args.tol, args.hs, args.boundary]),
+        json.dumps(
+            [
+                n,
+                frac,
+                control,
+                pbar,
+                args.repeats,
+                args.tol,
+                args.hs,
+                args.boundary,
+                args.fft_reference,
+            ]
+        ),
     ]
     res = subprocess.run(cmd, capture_output=True, text=True, check=False)
     if res.returncode != 0:
@@ -149,7 +188,15 @@ def main() -> None:
     ap.add_argument("--hs", choices=["range", "rms"], default="range")
     ap.add_argument("--boundary", choices=["free", "periodic"], default="free")
     ap.add_argument(
-        "--controls", nargs="+", default=["displacement", "load"], choices=["displacement", "load"]
+        "--controls",
+        nargs="+",
+        default=["displacement", "load"],
+        choices=["displacement", "plain", "load"],
+    )
+    ap.add_argument(
+        "--fft-reference",
+        action="store_true",
+        help="also time numpy rfft2 + irfft2 on the fine FFT grid (solve time in round trips)",
     )
     ap.add_argument("--out", type=str, default=None, help="append JSON lines here")
     ap.add_argument("--worker", type=str, default=None, help=argparse.SUPPRESS)
@@ -176,8 +223,14 @@ def main() -> None:
                 if "error" in row:
                     print(f"{n} | {frac} | {control} | ERROR {row['error']}", flush=True)
                 else:
-                    if control == "displacement":
+                    if control in ("displacement", "plain"):
                         pbar = row["mean_pressure"]
+                    trips = ""
+                    if row.get("numpy_round_trip_s") is not None:
+                        trips = (
+                            f" | numpy round trip {row['numpy_round_trip_s']:.3f} s, solve = "
+                            f"{row['solve_in_round_trips']:.1f} round trips"
+                        )
                     print(
                         f"{n} | {frac} | {control} | {row['seconds_median']:.2f} s | "
                         f"{row['iterations']} ({row['chord_steps']}) | {row['fft_products']} + "
@@ -185,7 +238,7 @@ def main() -> None:
                         f"{row['products_fine_total']:.1f} | "
                         f"{row['preconditioner_products_total']:.1f} ({row['pre_fine_eq']:.1f}) | "
                         f"{row['contact_fraction']:.4f} | "
-                        f"{row['peak_rss_gib']:.2f}",
+                        f"{row['peak_rss_gib']:.2f}{trips}",
                         flush=True,
                     )
                 if args.out:
