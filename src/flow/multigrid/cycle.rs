@@ -71,11 +71,14 @@ pub(super) fn level_cycle(
     let ip = &interps[0];
     // `r` is the sweeps' scratch too: the residual is dead once restricted.
     let r = &mut here.r;
-    if !warm {
-        x.par_iter_mut().for_each(|v| *v = 0.0);
+    if warm {
+        g.smooth(b, x, r, false);
+        g.residual(x, b, r);
+    } else {
+        // From 0 the sweep and the residual together read each face once.
+        g.smooth_from_zero(b, x);
+        g.residual_after_zero_sweep(x, r);
     }
-    g.smooth(b, x, r, false);
-    g.residual(x, b, r);
     // The level below's right-hand side and solution, taken out of its buffers for the
     // recursion (no copy) and put back after.
     let mut bc = std::mem::take(&mut rest[0].b);
@@ -113,20 +116,26 @@ pub(super) fn level_cycle(
         level_cycle(below, down, &bc, &mut xc, rest, coarse, depth + 1, k > 0);
     }
     let xcr = &xc;
-    x.par_chunks_mut(CHUNK).enumerate().for_each(|(blk, xs)| {
-        for (t, v) in xs.iter_mut().enumerate() {
-            let i = blk * CHUNK + t;
-            let mut s = 0.0;
-            unsafe {
-                for p in *ip.ptr.get_unchecked(i)..*ip.ptr.get_unchecked(i + 1) {
-                    s += f64::from(*ip.val.get_unchecked(p))
-                        * xcr.get_unchecked(*ip.col.get_unchecked(p) as usize);
+    // The interpolated correction added, and the result copied into `r` (the residual is
+    // dead): the reversed sweep's values from before it, without a pass of its own.
+    x.par_chunks_mut(CHUNK)
+        .zip(r.par_chunks_mut(CHUNK))
+        .enumerate()
+        .for_each(|(blk, (xs, olds))| {
+            for (t, (v, o)) in xs.iter_mut().zip(olds.iter_mut()).enumerate() {
+                let i = blk * CHUNK + t;
+                let mut s = 0.0;
+                unsafe {
+                    for p in *ip.ptr.get_unchecked(i)..*ip.ptr.get_unchecked(i + 1) {
+                        s += f64::from(*ip.val.get_unchecked(p))
+                            * xcr.get_unchecked(*ip.col.get_unchecked(p) as usize);
+                    }
                 }
+                *v += s;
+                *o = *v;
             }
-            *v += s;
-        }
-    });
+        });
     rest[0].b = bc;
     rest[0].x = xc;
-    g.smooth(b, x, r, true);
+    g.smooth_from_copy(b, x, r, true);
 }

@@ -79,7 +79,10 @@
 //!
 //! so the sweep is convergent however strongly the blocks are coupled (plain hybrid
 //! Gauss–Seidel, divisor `d_i`, needed 13 % more iterations than a sequential sweep; the
-//! ℓ1 divisor recovers them). Two cycles in a row are two steps of an `A`-symmetric
+//! ℓ1 divisor recovers them). A cycle from 0 sweeps with each row's faces to the rows
+//! before it in its block only ([`Graph::smooth_from_zero`]: the others meet zeros) and
+//! takes the residual from the remaining faces ([`Graph::residual_after_zero_sweep`]), so
+//! the two read each face once. Two cycles in a row are two steps of an `A`-symmetric
 //! convergent iteration, so the cycle is a symmetric positive definite operator and
 //! conjugate gradients apply; the coarsest level (≤ [`COARSEST`] unknowns) is solved by a
 //! dense Cholesky factor. Block boundaries and every sum's order are fixed, so the bits do
@@ -154,6 +157,9 @@ struct Graph {
     w: Vec<f32>,
     dir: Vec<f64>,
     d: Vec<f64>,
+    /// `Σ |w_ij|` over the faces of row `i` to rows outside its block of [`CHUNK`]: the
+    /// sweeps' ℓ1 divisor is `d_i + out_i`, the same in both directions.
+    out: Vec<f64>,
 }
 
 /// Interpolation from one level to the next, by rows (`p`) and by columns (`pt`).
@@ -251,7 +257,12 @@ impl Graph {
     fn smooth(&self, b: &[f64], x: &mut [f64], old: &mut [f64], reverse: bool) {
         self.check_vectors(&[&*x, b, &*old]);
         old.copy_from_slice(x);
-        let old = &*old;
+        self.smooth_from_copy(b, x, old, reverse);
+    }
+
+    /// [`Graph::smooth`] with `old` already a copy of `x` (written by the pass before it).
+    fn smooth_from_copy(&self, b: &[f64], x: &mut [f64], old: &[f64], reverse: bool) {
+        self.check_vectors(&[&*x, b, old]);
         x.par_chunks_mut(CHUNK).enumerate().for_each(|(blk, xc)| {
             let i0 = blk * CHUNK;
             let i1 = i0 + xc.len();
@@ -263,6 +274,8 @@ impl Graph {
                 // entries (`check_rows`); a column in `[i0, i1)` indexes `xc` at `j − i0`.
                 unsafe {
                     let mut v = b.get_unchecked(i) - self.d.get_unchecked(i) * xc.get_unchecked(t);
+                    // `out_i` again, summed in the same order as the stored one (the same
+                    // bits): cheaper than reading it, the faces being read anyway.
                     let mut out = 0.0;
                     let mut w_prev = 0.0;
                     for p in *self.ptr.get_unchecked(i)..*self.ptr.get_unchecked(i + 1) {
@@ -297,6 +310,65 @@ impl Graph {
         });
     }
 
+    /// The forward sweep of [`Graph::smooth`] from `x = 0`, written into `x`: every value a
+    /// row reads that is not yet swept is 0, so only its faces to the rows before it in its
+    /// block are read (columns ascending: the row's leading part),
+    /// `x_i = (b_i + Σ_{i0 ≤ j < i} w_ij x_j) / (d_i + out_i)`.
+    fn smooth_from_zero(&self, b: &[f64], x: &mut [f64]) {
+        self.check_vectors(&[&*x, b]);
+        x.par_chunks_mut(CHUNK).enumerate().for_each(|(blk, xc)| {
+            let i0 = blk * CHUNK;
+            for t in 0..xc.len() {
+                let i = i0 + t;
+                // SAFETY: as in `smooth`; a column in `[i0, i)` indexes `xc` at `j − i0 < t`.
+                unsafe {
+                    let (p0, p1) = (*self.ptr.get_unchecked(i), *self.ptr.get_unchecked(i + 1));
+                    let mut p = p0;
+                    // Faces to earlier blocks read old values, which are 0.
+                    while p < p1 && (*self.col.get_unchecked(p) as usize) < i0 {
+                        p += 1;
+                    }
+                    let mut v = *b.get_unchecked(i);
+                    while p < p1 {
+                        let j = *self.col.get_unchecked(p) as usize;
+                        if j >= i {
+                            break;
+                        }
+                        v += f64::from(*self.w.get_unchecked(p)) * xc.get_unchecked(j - i0);
+                        p += 1;
+                    }
+                    *xc.get_unchecked_mut(t) =
+                        v / (self.d.get_unchecked(i) + self.out.get_unchecked(i));
+                }
+            }
+        });
+    }
+
+    /// `r = b − A x` right after [`Graph::smooth_from_zero`] gave `x`, without reading `b`
+    /// or the faces that sweep read: row `i` was solved with the faces to rows before it in
+    /// its block, so `r_i = out_i x_i + Σ_{j ∉ [i0, i)} w_ij x_j`.
+    fn residual_after_zero_sweep(&self, x: &[f64], r: &mut [f64]) {
+        self.check_vectors(&[x, &*r]);
+        r.par_chunks_mut(CHUNK).enumerate().for_each(|(blk, rc)| {
+            let i0 = blk * CHUNK;
+            for (t, rv) in rc.iter_mut().enumerate() {
+                let i = i0 + t;
+                // SAFETY: as in `residual`.
+                unsafe {
+                    let mut v = self.out.get_unchecked(i) * x.get_unchecked(i);
+                    for p in *self.ptr.get_unchecked(i)..*self.ptr.get_unchecked(i + 1) {
+                        let j = *self.col.get_unchecked(p) as usize;
+                        if j >= i0 && j < i {
+                            continue;
+                        }
+                        v += f64::from(*self.w.get_unchecked(p)) * x.get_unchecked(j);
+                    }
+                    *rv = v;
+                }
+            }
+        });
+    }
+
     /// The level with faces `w` in compressed rows (`ptr`, `col`) and reservoir parts `dir`,
     /// each diagonal summed from the stored (rounded) faces: the level is the conductance form
     /// of its rounded faces exactly.
@@ -318,6 +390,18 @@ impl Graph {
                 }
             })
             .collect();
+        let out: Vec<f64> = (0..n)
+            .into_par_iter()
+            .with_min_len(CHUNK)
+            .map(|i| {
+                let blk = i / CHUNK;
+                let (i0, i1) = (blk * CHUNK, ((blk + 1) * CHUNK).min(n));
+                (ptr[i]..ptr[i + 1])
+                    .filter(|&p| (col[p] as usize) < i0 || (col[p] as usize) >= i1)
+                    .map(|p| f64::from(w[p]).abs())
+                    .sum()
+            })
+            .collect();
         Graph {
             n,
             ptr,
@@ -325,6 +409,7 @@ impl Graph {
             w,
             dir,
             d,
+            out,
         }
     }
 
@@ -342,6 +427,7 @@ impl Graph {
             w: Vec::new(),
             dir: Vec::new(),
             d: Vec::new(),
+            out: Vec::new(),
         }
     }
 }
@@ -566,9 +652,10 @@ impl Multigrid {
     /// Bytes held by the hierarchy (the fine stencil not counted).
     pub fn bytes(&self) -> u64 {
         // Per entry: column 4 + single-precision value 4 (interpolation: both by rows and by
-        // columns); per row: pointer, diagonal, reservoir part; and the work vectors (one on
-        // the finest level, three below).
-        let g = |g: &Graph| 8 * (g.ptr.len() + g.dir.len() + g.d.len()) + 8 * g.col.len();
+        // columns); per row: pointer, diagonal, reservoir part, ℓ1 term; and the work
+        // vectors (one on the finest level, three below).
+        let g =
+            |g: &Graph| 8 * (g.ptr.len() + g.dir.len() + g.d.len() + g.out.len()) + 8 * g.col.len();
         let p = |p: &Interp| 8 * (p.ptr.len() + p.tptr.len()) + 16 * p.col.len();
         let work: usize = {
             let bufs = self.bufs.lock().unwrap_or_else(|e| e.into_inner());
