@@ -109,6 +109,57 @@ pub(super) fn split_with(
     (cidx, nc as usize)
 }
 
+/// An undecided unknown's place in the buckets of the first pass: its neighbours in its
+/// bucket's list and its weight λ side by side, so that moving it between buckets touches
+/// one place in memory for it (three separate arrays took a cache miss for each).
+#[derive(Clone, Copy)]
+struct Node {
+    next: u32,
+    prev: u32,
+    lambda: u32,
+}
+
+/// Buckets of undecided unknowns by λ: doubly linked lists, each listing the unknowns most
+/// recently put in it first.
+struct Buckets {
+    head: Vec<u32>,
+    node: Vec<Node>,
+}
+
+impl Buckets {
+    #[inline(always)]
+    fn unlink(&mut self, i: usize) {
+        let Node { next, prev, lambda } = self.node[i];
+        if prev != NONE {
+            self.node[prev as usize].next = next;
+        } else {
+            self.head[lambda as usize] = next;
+        }
+        if next != NONE {
+            self.node[next as usize].prev = prev;
+        }
+    }
+
+    /// Puts unlinked unknown `i` first in bucket `l` (λ_i = l).
+    #[inline(always)]
+    fn push(&mut self, i: usize, l: usize) {
+        if l >= self.head.len() {
+            let cap = (2 * self.head.len()).max(l + 1);
+            self.head.resize(cap, NONE);
+        }
+        let h = self.head[l];
+        self.node[i] = Node {
+            next: h,
+            prev: NONE,
+            lambda: l as u32,
+        };
+        if h != NONE {
+            self.node[h as usize].prev = i as u32;
+        }
+        self.head[l] = i as u32;
+    }
+}
+
 /// Ruge–Stüben first pass on the unknowns `i0..i0 + state.len()` and the strong faces
 /// between them, sequential in unknown order: repeatedly the undecided unknown on which
 /// most undecided ones depend strongly becomes C and its strong dependents F.
@@ -117,7 +168,7 @@ fn first_pass(g: &impl Rows, wmax: &[f64], i0: usize, state: &mut [u8]) {
     let inside = |j: u32| (j as usize).wrapping_sub(i0) < n;
     // λ_i: unknowns of the block that depend strongly on i (i strongly influences j:
     // w_ji ≥ θ max_k w_jk; w_ji = w_ij, symmetric).
-    let mut lambda: Vec<u32> = (0..n)
+    let lambda: Vec<u32> = (0..n)
         .into_par_iter()
         .with_min_len(CHUNK)
         .map(|t| {
@@ -126,45 +177,34 @@ fn first_pass(g: &impl Rows, wmax: &[f64], i0: usize, state: &mut [u8]) {
                 .count() as u32
         })
         .collect();
-    // Buckets of undecided unknowns by λ: doubly linked lists.
     let top0 = lambda.iter().copied().max().unwrap_or(0) as usize;
-    let mut cap = (top0 + 1).max(16);
-    let mut head = vec![NONE; cap];
-    let mut next = vec![NONE; n];
-    let mut prev = vec![NONE; n];
-    // Insert in reverse so that each bucket lists unknowns in ascending order.
-    for i in (0..n).rev() {
-        let l = lambda[i] as usize;
-        next[i] = head[l];
-        if head[l] != NONE {
-            prev[head[l] as usize] = i as u32;
-        }
-        head[l] = i as u32;
-    }
-    let unlink = |i: usize, l: usize, head: &mut [u32], next: &mut [u32], prev: &mut [u32]| {
-        let (pv, nx) = (prev[i], next[i]);
-        if pv != NONE {
-            next[pv as usize] = nx;
-        } else {
-            head[l] = nx;
-        }
-        if nx != NONE {
-            prev[nx as usize] = pv;
-        }
-        prev[i] = NONE;
-        next[i] = NONE;
+    let mut b = Buckets {
+        head: vec![NONE; (top0 + 1).max(16)],
+        node: vec![
+            Node {
+                next: NONE,
+                prev: NONE,
+                lambda: 0,
+            };
+            n
+        ],
     };
+    // Inserted in reverse so that each bucket lists unknowns in ascending order.
+    for i in (0..n).rev() {
+        b.push(i, lambda[i] as usize);
+    }
+    drop(lambda);
     let mut top = top0;
     loop {
-        while top > 0 && head[top] == NONE {
+        while top > 0 && b.head[top] == NONE {
             top -= 1;
         }
-        let i = head[top];
+        let i = b.head[top];
         if i == NONE {
             break;
         }
         let i = i as usize;
-        unlink(i, top, &mut head, &mut next, &mut prev);
+        b.unlink(i);
         state[i] = C;
         // Strong dependents of i become F; their strong influencers gain weight.
         for (j, wij) in g.row(i0 + i) {
@@ -175,7 +215,7 @@ fn first_pass(g: &impl Rows, wmax: &[f64], i0: usize, state: &mut [u8]) {
             if state[j] != UNDECIDED || !strong(wij, wmax[i0 + j]) {
                 continue;
             }
-            unlink(j, lambda[j] as usize, &mut head, &mut next, &mut prev);
+            b.unlink(j);
             state[j] = F;
             for (k, wjk) in g.row(i0 + j) {
                 if !inside(k) {
@@ -185,19 +225,9 @@ fn first_pass(g: &impl Rows, wmax: &[f64], i0: usize, state: &mut [u8]) {
                 if state[k] != UNDECIDED || !strong(wjk, wmax[i0 + j]) {
                     continue;
                 }
-                let l = lambda[k] as usize;
-                unlink(k, l, &mut head, &mut next, &mut prev);
-                lambda[k] += 1;
-                let l = l + 1;
-                if l >= cap {
-                    cap *= 2;
-                    head.resize(cap, NONE);
-                }
-                next[k] = head[l];
-                if head[l] != NONE {
-                    prev[head[l] as usize] = k as u32;
-                }
-                head[l] = k as u32;
+                let l = b.node[k].lambda as usize + 1;
+                b.unlink(k);
+                b.push(k, l);
                 top = top.max(l);
             }
         }
@@ -210,18 +240,12 @@ fn first_pass(g: &impl Rows, wmax: &[f64], i0: usize, state: &mut [u8]) {
             if state[k] != UNDECIDED || !strong(wik, wmax[i0 + i]) {
                 continue;
             }
-            let l = lambda[k] as usize;
+            let l = b.node[k].lambda as usize;
             if l == 0 {
                 continue;
             }
-            unlink(k, l, &mut head, &mut next, &mut prev);
-            lambda[k] -= 1;
-            let l = l - 1;
-            next[k] = head[l];
-            if head[l] != NONE {
-                prev[head[l] as usize] = k as u32;
-            }
-            head[l] = k as u32;
+            b.unlink(k);
+            b.push(k, l - 1);
         }
     }
 }
