@@ -215,6 +215,21 @@ def test_bad_heights():
         solve(np.ones((5, 5)), 0.1)
 
 
+@pytest.mark.parametrize("cells", [[(299, 299), (250, 10)], [(0, 5), (299, 0)],
+                                   [(218, 160), (218, 161), (218, 159)]])
+def test_the_first_non_finite_initial_pressure_is_named(cells):
+    # 300² values: more than one block of the core's parallel search (65,536), the bad
+    # values in different blocks and on both sides of the edge at (218, 136).
+    prob = _core.ContactProblem(np.zeros((300, 300)), 1.0 / 300, 1.0, "periodic")
+    p0 = np.zeros((300, 300))
+    for k, c in enumerate(cells):
+        p0[c] = [np.nan, np.inf, -np.inf][k % 3]
+    first = min(cells)
+    with pytest.raises(ValueError, match="initial_pressure") as e:
+        prob.solve(approach=0.1, solver="polonsky-keer", start="pressure", initial_pressure=p0)
+    assert f"element ({first[0]}, {first[1]})" in str(e.value)
+
+
 def test_too_large_is_refused_with_an_estimate():
     s = leakpath.rmd(5, 2.3, seed=0)
     prob = ContactProblem(s, memory_limit=200 * 1024 * 1024 // 100)  # 2 MiB

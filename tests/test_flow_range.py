@@ -223,6 +223,22 @@ def test_clearly_negative_gaps_are_still_refused():
     assert np.isnan(f.pressure[1, 2]) and f.flow_rate > 0
 
 
+@pytest.mark.parametrize("cells", [[(299, 299), (250, 10)], [(0, 5), (299, 0)],
+                                   [(218, 160), (218, 161), (218, 159)]])
+def test_the_first_non_finite_gap_in_row_major_order_is_named(cells):
+    # 300² = 90,000 cells: more than one block of the core's parallel search (65,536 cells),
+    # with the bad values in different blocks and (last case) on both sides of a block edge
+    # at cell 65,536 = (218, 136) … (218, 161).
+    gap = np.ones((300, 300))
+    for k, c in enumerate(cells):
+        gap[c] = [np.nan, np.inf, -np.inf][k % 3]
+    first = min(cells)
+    with pytest.raises(InvalidArgumentError, match="not finite") as e:
+        leakpath.flow(gap, dx=1.0)
+    assert e.value.argument == "gap"
+    assert f"at ({first[0]}, {first[1]})" in str(e.value)
+
+
 def _prepared_by_definition(gap, contact):
     """docs/flow.md "Supported range of gaps", cell by cell: the largest free gap ``g_max``
     (0 when none is positive); a free gap below ``−ROUND_OFF·g_max`` refused (``None``); free

@@ -109,8 +109,15 @@ pub(crate) fn validate(
     Ok(())
 }
 
+/// The first non-finite element, searched in chunks (rayon's `position_first` over single
+/// elements took about 0.1 s on 16.8 million).
 fn first_non_finite(v: &[f64]) -> Option<usize> {
-    v.par_iter().position_first(|x| !x.is_finite())
+    const CHUNK: usize = 1 << 16;
+    v.par_chunks(CHUNK).enumerate().find_map_first(|(c, vs)| {
+        vs.iter()
+            .position(|x| !x.is_finite())
+            .map(|t| c * CHUNK + t)
+    })
 }
 
 /// Reject a hardness that is not a positive number (`+∞` is accepted: no cap).
