@@ -103,6 +103,7 @@
 
 mod coarsen;
 mod coarsest;
+mod columns;
 mod cycle;
 mod galerkin;
 mod interpolate;
@@ -122,6 +123,7 @@ use coarsen::{split, strong, strongest};
 #[cfg(test)]
 use coarsen::{split_in_blocks, split_with, SPLIT_BLOCK};
 use coarsest::DenseCholesky;
+use columns::{Absolute, Columns, Offsets};
 use cycle::{level_cycle, Fine, SharedMut};
 use galerkin::galerkin;
 use interpolate::interpolation;
@@ -151,7 +153,12 @@ const NONE: u32 = u32::MAX;
 struct Graph {
     n: usize,
     ptr: Vec<usize>,
+    /// Absolute columns, while the hierarchy is built (and on a level whose offsets do
+    /// not fit `near`).
     col: Vec<u32>,
+    /// The columns as offsets from their row ([`columns`]), once the level is complete;
+    /// empty before, or when an offset does not fit.
+    near: Vec<i16>,
     /// Faces in single precision (`d` is summed from the rounded faces: the level is the
     /// conductance form of its rounded faces exactly).
     w: Vec<f32>,
@@ -213,6 +220,14 @@ pub fn memory_estimate(unknowns: usize) -> u64 {
 impl Graph {
     /// `r = b − A x`.
     fn residual(&self, x: &[f64], b: &[f64], r: &mut [f64]) {
+        if self.near.is_empty() {
+            self.residual_with(&Absolute(&self.col), x, b, r);
+        } else {
+            self.residual_with(&Offsets(&self.near), x, b, r);
+        }
+    }
+
+    fn residual_with(&self, cols: &impl Columns, x: &[f64], b: &[f64], r: &mut [f64]) {
         self.check_vectors(&[x, b, &*r]);
         r.par_chunks_mut(CHUNK).enumerate().for_each(|(blk, rc)| {
             let i0 = blk * CHUNK;
@@ -224,8 +239,7 @@ impl Graph {
                 unsafe {
                     let mut v = b.get_unchecked(i) - self.d.get_unchecked(i) * x.get_unchecked(i);
                     for p in *self.ptr.get_unchecked(i)..*self.ptr.get_unchecked(i + 1) {
-                        v += f64::from(*self.w.get_unchecked(p))
-                            * x.get_unchecked(*self.col.get_unchecked(p) as usize);
+                        v += f64::from(*self.w.get_unchecked(p)) * x.get_unchecked(cols.at(p, i));
                     }
                     *rv = v;
                 }
@@ -262,6 +276,21 @@ impl Graph {
 
     /// [`Graph::smooth`] with `old` already a copy of `x` (written by the pass before it).
     fn smooth_from_copy(&self, b: &[f64], x: &mut [f64], old: &[f64], reverse: bool) {
+        if self.near.is_empty() {
+            self.smooth_with(&Absolute(&self.col), b, x, old, reverse);
+        } else {
+            self.smooth_with(&Offsets(&self.near), b, x, old, reverse);
+        }
+    }
+
+    fn smooth_with(
+        &self,
+        cols: &impl Columns,
+        b: &[f64],
+        x: &mut [f64],
+        old: &[f64],
+        reverse: bool,
+    ) {
         self.check_vectors(&[&*x, b, old]);
         x.par_chunks_mut(CHUNK).enumerate().for_each(|(blk, xc)| {
             let i0 = blk * CHUNK;
@@ -279,7 +308,7 @@ impl Graph {
                     let mut out = 0.0;
                     let mut w_prev = 0.0;
                     for p in *self.ptr.get_unchecked(i)..*self.ptr.get_unchecked(i + 1) {
-                        let j = *self.col.get_unchecked(p) as usize;
+                        let j = cols.at(p, i);
                         let w = f64::from(*self.w.get_unchecked(p));
                         let inside = j >= i0 && j < i1;
                         if inside && j == prev {
@@ -315,6 +344,14 @@ impl Graph {
     /// block are read (columns ascending: the row's leading part),
     /// `x_i = (b_i + Σ_{i0 ≤ j < i} w_ij x_j) / (d_i + out_i)`.
     fn smooth_from_zero(&self, b: &[f64], x: &mut [f64]) {
+        if self.near.is_empty() {
+            self.smooth_from_zero_with(&Absolute(&self.col), b, x);
+        } else {
+            self.smooth_from_zero_with(&Offsets(&self.near), b, x);
+        }
+    }
+
+    fn smooth_from_zero_with(&self, cols: &impl Columns, b: &[f64], x: &mut [f64]) {
         self.check_vectors(&[&*x, b]);
         x.par_chunks_mut(CHUNK).enumerate().for_each(|(blk, xc)| {
             let i0 = blk * CHUNK;
@@ -325,12 +362,12 @@ impl Graph {
                     let (p0, p1) = (*self.ptr.get_unchecked(i), *self.ptr.get_unchecked(i + 1));
                     let mut p = p0;
                     // Faces to earlier blocks read old values, which are 0.
-                    while p < p1 && (*self.col.get_unchecked(p) as usize) < i0 {
+                    while p < p1 && cols.at(p, i) < i0 {
                         p += 1;
                     }
                     let mut v = *b.get_unchecked(i);
                     while p < p1 {
-                        let j = *self.col.get_unchecked(p) as usize;
+                        let j = cols.at(p, i);
                         if j >= i {
                             break;
                         }
@@ -348,6 +385,14 @@ impl Graph {
     /// or the faces that sweep read: row `i` was solved with the faces to rows before it in
     /// its block, so `r_i = out_i x_i + Σ_{j ∉ [i0, i)} w_ij x_j`.
     fn residual_after_zero_sweep(&self, x: &[f64], r: &mut [f64]) {
+        if self.near.is_empty() {
+            self.residual_after_zero_sweep_with(&Absolute(&self.col), x, r);
+        } else {
+            self.residual_after_zero_sweep_with(&Offsets(&self.near), x, r);
+        }
+    }
+
+    fn residual_after_zero_sweep_with(&self, cols: &impl Columns, x: &[f64], r: &mut [f64]) {
         self.check_vectors(&[x, &*r]);
         r.par_chunks_mut(CHUNK).enumerate().for_each(|(blk, rc)| {
             let i0 = blk * CHUNK;
@@ -357,7 +402,7 @@ impl Graph {
                 unsafe {
                     let mut v = self.out.get_unchecked(i) * x.get_unchecked(i);
                     for p in *self.ptr.get_unchecked(i)..*self.ptr.get_unchecked(i + 1) {
-                        let j = *self.col.get_unchecked(p) as usize;
+                        let j = cols.at(p, i);
                         if j >= i0 && j < i {
                             continue;
                         }
@@ -406,6 +451,7 @@ impl Graph {
             n,
             ptr,
             col,
+            near: Vec::new(),
             w,
             dir,
             d,
@@ -415,7 +461,29 @@ impl Graph {
 
     /// Entries off the diagonal.
     fn entries(&self) -> usize {
-        self.col.len()
+        self.w.len()
+    }
+
+    /// Stores the columns as offsets from their rows where they all fit 16 bits (the level
+    /// complete: only the cycle reads it from here on).
+    fn compress_columns(&mut self) {
+        if !self.near.is_empty() || self.col.is_empty() {
+            return;
+        }
+        if let Some(near) = columns::offsets(&self.ptr, &self.col) {
+            self.near = near;
+            self.col = Vec::new();
+        }
+    }
+
+    /// Column of entry `p` of row `i` (either storage).
+    #[inline(always)]
+    fn column(&self, p: usize, i: usize) -> usize {
+        if self.near.is_empty() {
+            self.col[p] as usize
+        } else {
+            i.wrapping_add_signed(isize::from(self.near[p]))
+        }
     }
 
     /// A level of `n` unknowns without stored rows (the finest, applied from the stencil).
@@ -424,6 +492,7 @@ impl Graph {
             n,
             ptr: Vec::new(),
             col: Vec::new(),
+            near: Vec::new(),
             w: Vec::new(),
             dir: Vec::new(),
             d: Vec::new(),
@@ -588,7 +657,9 @@ impl Multigrid {
                 break;
             }
             let Some((ip, c)) = coarsen(g) else { break };
-            levels.last_mut().expect("non-empty").dir = Vec::new();
+            let done = levels.last_mut().expect("non-empty");
+            done.dir = Vec::new();
+            done.compress_columns();
             interps.push(ip);
             levels.push(c);
         }
@@ -615,6 +686,7 @@ impl Multigrid {
         };
         for g in levels.iter_mut() {
             g.dir = Vec::new();
+            g.compress_columns();
         }
         if profiling() {
             eprintln!(
@@ -654,8 +726,11 @@ impl Multigrid {
         // Per entry: column 4 + single-precision value 4 (interpolation: both by rows and by
         // columns); per row: pointer, diagonal, reservoir part, ℓ1 term; and the work
         // vectors (one on the finest level, three below).
-        let g =
-            |g: &Graph| 8 * (g.ptr.len() + g.dir.len() + g.d.len() + g.out.len()) + 8 * g.col.len();
+        let g = |g: &Graph| {
+            8 * (g.ptr.len() + g.dir.len() + g.d.len() + g.out.len())
+                + 4 * (g.w.len() + g.col.len())
+                + 2 * g.near.len()
+        };
         let p = |p: &Interp| 8 * (p.ptr.len() + p.tptr.len()) + 16 * p.col.len();
         let work: usize = {
             let bufs = self.bufs.lock().unwrap_or_else(|e| e.into_inner());

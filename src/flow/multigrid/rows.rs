@@ -26,11 +26,8 @@ impl Rows for Graph {
 
     #[inline(always)]
     fn row(&self, i: usize) -> impl Iterator<Item = (u32, f64)> + '_ {
-        let r = self.ptr[i]..self.ptr[i + 1];
-        self.col[r.clone()]
-            .iter()
-            .zip(&self.w[r])
-            .map(|(&c, &w)| (c, f64::from(w)))
+        (self.ptr[i]..self.ptr[i + 1])
+            .map(move |p| (self.column(p, i) as u32, f64::from(self.w[p])))
     }
 
     #[inline(always)]
@@ -46,6 +43,12 @@ impl Rows for Graph {
     #[inline(always)]
     fn weight(&self, i: usize, j: u32) -> f64 {
         let row = self.ptr[i]..self.ptr[i + 1];
+        if !self.near.is_empty() {
+            return row
+                .into_iter()
+                .find(|&p| self.column(p, i) == j as usize)
+                .map_or(0.0, |p| f64::from(self.w[p]));
+        }
         match self.col[row.clone()].binary_search(&j) {
             Ok(p) => f64::from(self.w[row.start + p]),
             Err(_) => 0.0,
