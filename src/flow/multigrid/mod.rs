@@ -251,8 +251,13 @@ impl Graph {
     /// applied from the stencil) and vectors of the level's size.
     fn check_vectors(&self, vs: &[&[f64]]) {
         assert!(
-            self.ptr.len() == self.n + 1 && self.d.len() == self.n,
+            self.ptr.len() == self.n + 1 && self.d.len() == self.n && self.out.len() == self.n,
             "a level with stored rows"
+        );
+        assert!(
+            self.near.len() == self.w.len()
+                || (self.near.is_empty() && self.col.len() == self.w.len()),
+            "a column per face, in one of the two storages"
         );
         assert!(
             vs.iter().all(|v| v.len() == self.n),
