@@ -51,3 +51,45 @@ pub fn check_shape(ny: usize, nx: usize) -> Result<()> {
     }
     Ok(())
 }
+
+/// The first cell, in row-major order, of the grid values `v` for which `bad(k, v[k])`
+/// holds. Searched in parallel by chunks of cells: rayon's `position_first` over single
+/// cells paid its scheduling per cell (0.13 s for one pass over a 4097² grid, against
+/// 0.007 s by chunks).
+pub fn first_cell<T: Sync>(v: &[T], bad: impl Fn(usize, &T) -> bool + Sync) -> Option<usize> {
+    use rayon::prelude::*;
+    const CHUNK: usize = 1 << 16;
+    v.par_chunks(CHUNK).enumerate().find_map_first(|(c, vs)| {
+        let base = c * CHUNK;
+        (0..vs.len())
+            .find(|&t| bad(base + t, &vs[t]))
+            .map(|t| base + t)
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::first_cell;
+
+    #[test]
+    fn first_cell_is_the_first_in_row_major_order() {
+        // 200,000 cells (four chunks); bad cells in several chunks, both sides of the edge
+        // at 65,536, and none: against a plain sequential search.
+        let n = 200_000;
+        for bad in [
+            vec![],
+            vec![199_999],
+            vec![150_000, 70_000],
+            vec![65_536, 65_535, 131_072],
+            vec![0, 5],
+        ] {
+            let v: Vec<f64> = (0..n)
+                .map(|k| if bad.contains(&k) { f64::NAN } else { k as f64 })
+                .collect();
+            let want = v.iter().position(|x| x.is_nan());
+            assert_eq!(first_cell(&v, |_, x| x.is_nan()), want, "bad cells {bad:?}");
+            // The index is the cell's own.
+            assert_eq!(first_cell(&v, |k, _| k == 123_456), Some(123_456));
+        }
+    }
+}
