@@ -30,8 +30,14 @@ pub(super) struct Offsets<'a>(pub(super) &'a [i16]);
 impl Columns for Offsets<'_> {
     #[inline(always)]
     unsafe fn at(&self, p: usize, i: usize) -> usize {
-        i.wrapping_add_signed(isize::from(*self.0.get_unchecked(p)))
+        from_offset(i, *self.0.get_unchecked(p))
     }
+}
+
+/// Column `i + offset`.
+#[inline(always)]
+pub(super) fn from_offset(i: usize, offset: i16) -> usize {
+    i.wrapping_add_signed(isize::from(offset))
 }
 
 /// The offsets `j − i` of rows `ptr`/`col`, or `None` when one does not fit in 16 bits.

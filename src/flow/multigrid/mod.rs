@@ -217,14 +217,24 @@ pub fn memory_estimate(unknowns: usize) -> u64 {
     unknowns as u64 * 150
 }
 
+/// `$body` with `$cols` bound to the level's column storage ([`columns`]): one
+/// monomorphised copy of a loop per storage, chosen once per call.
+macro_rules! with_columns {
+    ($g:expr, $cols:ident => $body:expr) => {
+        if $g.near.is_empty() {
+            let $cols = &Absolute(&$g.col);
+            $body
+        } else {
+            let $cols = &Offsets(&$g.near);
+            $body
+        }
+    };
+}
+
 impl Graph {
     /// `r = b − A x`.
     fn residual(&self, x: &[f64], b: &[f64], r: &mut [f64]) {
-        if self.near.is_empty() {
-            self.residual_with(&Absolute(&self.col), x, b, r);
-        } else {
-            self.residual_with(&Offsets(&self.near), x, b, r);
-        }
+        with_columns!(self, cols => self.residual_with(cols, x, b, r));
     }
 
     fn residual_with(&self, cols: &impl Columns, x: &[f64], b: &[f64], r: &mut [f64]) {
@@ -281,11 +291,7 @@ impl Graph {
 
     /// [`Graph::smooth`] with `old` already a copy of `x` (written by the pass before it).
     fn smooth_from_copy(&self, b: &[f64], x: &mut [f64], old: &[f64], reverse: bool) {
-        if self.near.is_empty() {
-            self.smooth_with(&Absolute(&self.col), b, x, old, reverse);
-        } else {
-            self.smooth_with(&Offsets(&self.near), b, x, old, reverse);
-        }
+        with_columns!(self, cols => self.smooth_with(cols, b, x, old, reverse));
     }
 
     fn smooth_with(
@@ -349,11 +355,7 @@ impl Graph {
     /// block are read (columns ascending: the row's leading part),
     /// `x_i = (b_i + Σ_{i0 ≤ j < i} w_ij x_j) / (d_i + out_i)`.
     fn smooth_from_zero(&self, b: &[f64], x: &mut [f64]) {
-        if self.near.is_empty() {
-            self.smooth_from_zero_with(&Absolute(&self.col), b, x);
-        } else {
-            self.smooth_from_zero_with(&Offsets(&self.near), b, x);
-        }
+        with_columns!(self, cols => self.smooth_from_zero_with(cols, b, x));
     }
 
     fn smooth_from_zero_with(&self, cols: &impl Columns, b: &[f64], x: &mut [f64]) {
@@ -390,11 +392,7 @@ impl Graph {
     /// or the faces that sweep read: row `i` was solved with the faces to rows before it in
     /// its block, so `r_i = out_i x_i + Σ_{j ∉ [i0, i)} w_ij x_j`.
     fn residual_after_zero_sweep(&self, x: &[f64], r: &mut [f64]) {
-        if self.near.is_empty() {
-            self.residual_after_zero_sweep_with(&Absolute(&self.col), x, r);
-        } else {
-            self.residual_after_zero_sweep_with(&Offsets(&self.near), x, r);
-        }
+        with_columns!(self, cols => self.residual_after_zero_sweep_with(cols, x, r));
     }
 
     fn residual_after_zero_sweep_with(&self, cols: &impl Columns, x: &[f64], r: &mut [f64]) {
@@ -487,7 +485,7 @@ impl Graph {
         if self.near.is_empty() {
             self.col[p] as usize
         } else {
-            i.wrapping_add_signed(isize::from(self.near[p]))
+            columns::from_offset(i, self.near[p])
         }
     }
 

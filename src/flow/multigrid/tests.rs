@@ -433,6 +433,16 @@ fn sweep_by_definition(g: &Graph, b: &[f64], x: &mut [f64], reverse: bool) {
     }
 }
 
+/// The largest `|want_i|` and the largest `|x_i − want_i|`.
+fn largest_and_worst(want: &[f64], x: &[f64]) -> (f64, f64) {
+    let scale = want.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    let worst = x
+        .iter()
+        .zip(want)
+        .fold(0.0f64, |m, (a, w)| m.max((a - w).abs()));
+    (scale, worst)
+}
+
 #[test]
 fn the_sweep_is_l1_gauss_seidel_in_blocks() {
     // `S` and the level below it of a 300² field with every cell open (so every unknown
@@ -448,12 +458,8 @@ fn the_sweep_is_l1_gauss_seidel_in_blocks() {
         for reverse in [false, true, false] {
             g.smooth(&b, &mut x, &mut scratch, reverse);
             sweep_by_definition(g, &b, &mut want, reverse);
-            let scale = want.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            let (scale, worst) = largest_and_worst(&want, &x);
             assert!(scale.is_finite() && x.iter().all(|v| v.is_finite()));
-            let worst = x
-                .iter()
-                .zip(&want)
-                .fold(0.0f64, |m, (a, w)| m.max((a - w).abs()));
             assert!(
                 worst <= 1e-13 * scale,
                 "{} unknowns, reverse {reverse}: {worst:e} off (largest value {scale:e})",
@@ -477,12 +483,8 @@ fn the_sweep_from_zero_and_its_residual_follow_the_definitions() {
         g.smooth_from_zero(&b, &mut x);
         let mut want = vec![0.0; g.n];
         sweep_by_definition(g, &b, &mut want, false);
-        let scale = want.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        let (scale, worst) = largest_and_worst(&want, &x);
         assert!(scale > 0.0 && scale.is_finite());
-        let worst = x
-            .iter()
-            .zip(&want)
-            .fold(0.0f64, |m, (a, w)| m.max((a - w).abs()));
         assert!(
             worst <= 1e-13 * scale,
             "{} unknowns: sweep {worst:e} off",
@@ -550,8 +552,8 @@ fn columns_as_offsets_give_the_same_bits_as_absolute_columns() {
 
 #[test]
 fn offsets_that_do_not_fit_16_bits_keep_absolute_columns() {
-    // Row 0: columns 1 and 5; row 1: column 0; row 2: column 2 + 32767 (fits), then a row
-    // whose column is 32768 away (does not).
+    // Row 0: columns 1 and 5; row 1: column 0; row 2: column 2 + 32767 (fits), then the
+    // same with column 2 + 32768 (does not); and a row whose only column is the one before.
     let ptr = [0, 2, 3, 4];
     assert_eq!(
         super::columns::offsets(&ptr, &[1, 5, 0, 32769]),
