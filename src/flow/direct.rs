@@ -13,11 +13,12 @@
 //!
 //! # Solves
 //!
-//! The flow's two right-hand sides (and their refinement) are solved together by
-//! [`supernodal_solve_pair`]: plain loops over each supernode's dense block, the two
-//! columns interleaved, instead of faer's general solve, which dispatches dense kernels and
-//! a temporary per supernode (the supernodes here have about five columns); 2.2× faster on
-//! the 513² contact gap of the benchmarks (docs/flow.md).
+//! The flow's two right-hand sides (and their refinement) are solved by
+//! [`supernodal_solve`]: plain loops over each supernode's dense block instead of faer's
+//! general solve, which dispatches dense kernels and a temporary per supernode (the
+//! supernodes here have about five columns); 2.2× faster on the 513² contact gap of the
+//! benchmarks (docs/flow.md). The two columns are solved at once on two threads, each
+//! with the arithmetic it has alone (docs/flow.md).
 //!
 //! # Memory
 //!
@@ -103,7 +104,7 @@ pub struct Factor {
     values: Vec<f64>,
     /// Scratch of one solve.
     solve_buf: MemBuffer,
-    /// Two interleaved columns in the factor's order ([`supernodal_solve_pair`]).
+    /// Two columns in the factor's order, one after the other ([`supernodal_solve`]).
     work: Vec<f64>,
     /// Whether the analysis was a kept one.
     reused: bool,
@@ -223,11 +224,10 @@ impl Factor {
             // scratch does not fit.
             crate::dense_scratch::ensure(par)?;
         }
-        let mut values = Vec::new();
-        values
-            .try_reserve_exact(symbolic.len_val())
+        // Zeroed pages from the kernel: the factorisation writes every value, so filling
+        // them here too would be a pass over the whole factor for nothing.
+        let mut values: Vec<f64> = crate::alloc::try_zeroed(symbolic.len_val(), "the factor")
             .map_err(|_| failed("out of memory"))?;
-        values.resize(symbolic.len_val(), 0.0);
         {
             let mut buf = MemBuffer::try_new(scratch).map_err(|_| failed("out of memory"))?;
             symbolic
@@ -318,28 +318,33 @@ impl Factor {
         if let (SymbolicCholeskyRaw::Supernodal(sn), 2, Some(perm)) =
             (symbolic.raw(), cols.len(), symbolic.perm())
         {
-            // Both columns interleaved, in the factor's order: `w[2p + c]` is column `c` at
-            // position `p`, whose cell is `cells[fwd[p]]`.
+            // Each column in the factor's order (`w_c[p]` at position `p`, whose cell is
+            // `cells[fwd[p]]`), the two solved at once on two threads: each column's
+            // arithmetic is the same as alone, so the answer does not depend on the threads.
             let fwd = perm.arrays().0;
-            let w = &mut self.work;
+            let (w0, w1) = self.work.split_at_mut(m);
             for (p, &q) in fwd.iter().enumerate() {
                 let k = cells[q];
                 let on = live(q);
-                w[2 * p] = if on { cols[0].0[k] } else { 0.0 };
-                w[2 * p + 1] = if on { cols[1].0[k] } else { 0.0 };
+                w0[p] = if on { cols[0].0[k] } else { 0.0 };
+                w1[p] = if on { cols[1].0[k] } else { 0.0 };
             }
-            supernodal_solve_pair(sn, &self.values, w);
+            let values = &self.values;
+            rayon::join(
+                || supernodal_solve(sn, values, w0),
+                || supernodal_solve(sn, values, w1),
+            );
             for (p, &q) in fwd.iter().enumerate() {
                 if !live(q) {
                     continue;
                 }
                 let k = cells[q];
                 if add {
-                    cols[0].1[k] += w[2 * p];
-                    cols[1].1[k] += w[2 * p + 1];
+                    cols[0].1[k] += w0[p];
+                    cols[1].1[k] += w1[p];
                 } else {
-                    cols[0].1[k] = w[2 * p];
-                    cols[1].1[k] = w[2 * p + 1];
+                    cols[0].1[k] = w0[p];
+                    cols[1].1[k] = w1[p];
                 }
             }
             return;
@@ -420,13 +425,12 @@ impl Factor {
     }
 }
 
-/// `L Lᵀ y = w` in place for two interleaved columns (`w[2p + c]`, positions in the factor's
-/// order) with the supernodal factor `values` of `sn`: each supernode is a dense
-/// column-major block, its diagonal block (lower triangle) on top of the rows of its pattern.
-/// Forward by columns (`y_c = w_c / L_cc`, then `w_r −= L_rc y_c` below), backward by rows
-/// of `Lᵀ` (`y_c = (w_c − Σ_r L_rc y_r) / L_cc`), each entry of the factor read once per
-/// pass for both columns.
-fn supernodal_solve_pair(sn: &SymbolicSupernodalCholesky<usize>, values: &[f64], w: &mut [f64]) {
+/// `L Lᵀ y = w` in place (positions in the factor's order) with the supernodal factor
+/// `values` of `sn`: each supernode is a dense column-major block, its diagonal block (lower
+/// triangle) on top of the rows of its pattern. Forward by columns (`y_c = w_c / L_cc`,
+/// then `w_r −= L_rc y_c` below), backward by rows of `Lᵀ`
+/// (`y_c = (w_c − Σ_r L_rc y_r) / L_cc`).
+fn supernodal_solve(sn: &SymbolicSupernodalCholesky<usize>, values: &[f64], w: &mut [f64]) {
     let ns = sn.n_supernodes();
     let (begin, end) = (sn.supernode_begin(), sn.supernode_end());
     let (rptr, vptr) = (sn.col_ptr_for_row_idx(), sn.col_ptr_for_val());
@@ -439,18 +443,13 @@ fn supernodal_solve_pair(sn: &SymbolicSupernodalCholesky<usize>, values: &[f64],
         for c in 0..ncols {
             let col = &block[c * nrows..(c + 1) * nrows];
             let i = start + c;
-            let d = col[c];
-            let (y0, y1) = (w[2 * i] / d, w[2 * i + 1] / d);
-            w[2 * i] = y0;
-            w[2 * i + 1] = y1;
-            for (r, &l) in col[c + 1..ncols].iter().enumerate() {
-                let t = i + 1 + r;
-                w[2 * t] -= l * y0;
-                w[2 * t + 1] -= l * y1;
+            let y = w[i] / col[c];
+            w[i] = y;
+            for (wt, &l) in w[i + 1..start + ncols].iter_mut().zip(&col[c + 1..ncols]) {
+                *wt -= l * y;
             }
             for (&t, &l) in pattern.iter().zip(&col[ncols..]) {
-                w[2 * t] -= l * y0;
-                w[2 * t + 1] -= l * y1;
+                w[t] -= l * y;
             }
         }
     }
@@ -462,19 +461,14 @@ fn supernodal_solve_pair(sn: &SymbolicSupernodalCholesky<usize>, values: &[f64],
         for c in (0..ncols).rev() {
             let col = &block[c * nrows..(c + 1) * nrows];
             let i = start + c;
-            let (mut a0, mut a1) = (w[2 * i], w[2 * i + 1]);
-            for (r, &l) in col[c + 1..ncols].iter().enumerate() {
-                let t = i + 1 + r;
-                a0 -= l * w[2 * t];
-                a1 -= l * w[2 * t + 1];
+            let mut a = w[i];
+            for (&wt, &l) in w[i + 1..start + ncols].iter().zip(&col[c + 1..ncols]) {
+                a -= l * wt;
             }
             for (&t, &l) in pattern.iter().zip(&col[ncols..]) {
-                a0 -= l * w[2 * t];
-                a1 -= l * w[2 * t + 1];
+                a -= l * w[t];
             }
-            let d = col[c];
-            w[2 * i] = a0 / d;
-            w[2 * i + 1] = a1 / d;
+            w[i] = a / col[c];
         }
     }
 }
@@ -594,6 +588,15 @@ mod tests {
         let (e1, e2) = (rel(&g1, &b1), rel(&g2, &b2));
         let (mut x1, mut x2) = (vec![0.0; n], vec![0.0; n]);
         f.solve_pair(&b1, &b2, &mut x1, &mut x2);
+        // The two columns on two threads or on one: the same bits.
+        let (mut y1, mut y2) = (vec![0.0; n], vec![0.0; n]);
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(1)
+            .build()
+            .unwrap()
+            .install(|| f.solve_pair(&b1, &b2, &mut y1, &mut y2));
+        let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert!(bits(&x1) == bits(&y1) && bits(&x2) == bits(&y2));
         let (p1, p2) = (rel(&x1, &b1), rel(&x2, &b2));
         assert!(p1 <= 4.0 * e1.max(1e-16) && p1 < 1e-10, "{p1:e} {e1:e}");
         assert!(p2 <= 4.0 * e2.max(1e-16) && p2 < 1e-10, "{p2:e} {e2:e}");
