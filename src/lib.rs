@@ -20,4 +20,7 @@ pub mod grid;
 #[cfg(feature = "python")]
 mod python;
 
+#[cfg(test)]
+mod test_support;
+
 pub use error::{Error, Result};

@@ -445,17 +445,7 @@ mod tests {
     use super::*;
     use faer::Mat;
 
-    fn lcg(seed: u64, n: usize) -> Vec<f64> {
-        let mut s = seed;
-        (0..n)
-            .map(|_| {
-                s = s
-                    .wrapping_mul(6364136223846793005)
-                    .wrapping_add(1442695040888963407);
-                (s >> 11) as f64 / (1u64 << 53) as f64
-            })
-            .collect()
-    }
+    use crate::test_support::lcg;
 
     /// `C_PP⁻¹ b_P` by a fresh dense Cholesky of the block built directly from the kernel.
     fn dense_solve(ker: &Kernel, idx: &[usize], b: &[f64]) -> Vec<f64> {

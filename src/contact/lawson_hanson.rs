@@ -326,17 +326,7 @@ mod tests {
     use super::*;
     use crate::elastic::operator::Operator;
 
-    fn lcg(seed: u64, n: usize) -> Vec<f64> {
-        let mut s = seed;
-        (0..n)
-            .map(|_| {
-                s = s
-                    .wrapping_mul(6364136223846793005)
-                    .wrapping_add(1442695040888963407);
-                (s >> 11) as f64 / (1u64 << 53) as f64
-            })
-            .collect()
-    }
+    use crate::test_support::lcg;
 
     /// Projected Gauss–Seidel on the dense matrix: an independent reference.
     fn pgs(kernel: &Kernel, b: &[f64]) -> Vec<f64> {

@@ -273,17 +273,7 @@ pub fn assert_restricted_is_dense(
 mod tests {
     use super::*;
 
-    fn lcg(seed: u64, n: usize) -> Vec<f64> {
-        let mut s = seed;
-        (0..n)
-            .map(|_| {
-                s = s
-                    .wrapping_mul(6364136223846793005)
-                    .wrapping_add(1442695040888963407);
-                (s >> 11) as f64 / (1u64 << 53) as f64
-            })
-            .collect()
-    }
+    use crate::test_support::lcg;
 
     #[test]
     fn smooth_sizes() {

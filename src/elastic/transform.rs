@@ -312,17 +312,7 @@ mod tests {
     use crate::elastic::kernel::Kernel;
     use crate::elastic::operator::{assert_restricted_is_dense, dense_apply, Operator};
 
-    fn lcg(seed: u64, n: usize) -> Vec<f64> {
-        let mut s = seed;
-        (0..n)
-            .map(|_| {
-                s = s
-                    .wrapping_mul(6364136223846793005)
-                    .wrapping_add(1442695040888963407);
-                (s >> 11) as f64 / (1u64 << 53) as f64
-            })
-            .collect()
-    }
+    use crate::test_support::lcg;
 
     fn max_abs(v: &[f64]) -> f64 {
         v.iter().fold(0.0f64, |a, &x| a.max(x.abs()))

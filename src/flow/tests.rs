@@ -3,19 +3,10 @@ use super::*;
 use faer::prelude::Solve;
 use faer::{Mat, Side};
 
-/// Uniform numbers in `[0, 1)` from a fixed linear congruential sequence.
+/// [`crate::test_support::lcg`] from `seed` advanced once (the flow tests' inputs).
 pub(super) fn lcg(seed: u64, n: usize) -> Vec<f64> {
-    let mut s = seed
-        .wrapping_mul(6364136223846793005)
-        .wrapping_add(1442695040888963407);
-    (0..n)
-        .map(|_| {
-            s = s
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            ((s >> 11) as f64) / ((1u64 << 53) as f64)
-        })
-        .collect()
+    let (a, c) = crate::test_support::LCG;
+    crate::test_support::lcg(seed.wrapping_mul(a).wrapping_add(c), n)
 }
 
 fn problem<'a>(gap: &'a [f64], ny: usize, nx: usize, axis: usize, periodic: bool) -> Problem<'a> {

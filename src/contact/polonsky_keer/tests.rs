@@ -8,17 +8,7 @@ use crate::elastic::kernel::love_displacement;
 use crate::elastic::operator::dense_apply;
 use std::f64::consts::PI;
 
-fn lcg(seed: u64, n: usize) -> Vec<f64> {
-    let mut s = seed;
-    (0..n)
-        .map(|_| {
-            s = s
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (s >> 11) as f64 / (1u64 << 53) as f64
-        })
-        .collect()
-}
+use crate::test_support::lcg;
 
 /// A rough-ish random surface: white noise smoothed by a 3×3 (periodic) box filter.
 fn rough(ny: usize, nx: usize, seed: u64) -> Vec<f64> {
