@@ -69,7 +69,8 @@ def plot_kstar(result: SweepResult, ax: Axes, column: str, xlabel: str, title: s
     lower edge."""
     x, y = result.column(column), result.column("K_star")
     leak = np.isfinite(y) & (y > 0)
-    ax.plot(x[leak], y[leak], **_LINE, label="leaking levels")
+    if leak.any():
+        ax.plot(x[leak], y[leak], **_LINE, label="leaking levels")
     ax.set_yscale("log")
     shut = np.isfinite(y) & (y == 0)
     if shut.any():
