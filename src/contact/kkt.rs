@@ -158,15 +158,9 @@ mod tests {
     }
 
     fn field(n: usize, seed: u64) -> (Vec<f64>, Vec<f64>) {
-        let mut s = seed;
-        let mut next = || {
-            s = s
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            ((s >> 11) as f64) / ((1u64 << 53) as f64) - 0.5
-        };
-        let p = (0..n).map(|_| next().max(0.0)).collect();
-        let g = (0..n).map(|_| 1e-3 * next()).collect();
+        let u = crate::test_support::lcg(seed, 2 * n);
+        let p = u[..n].iter().map(|v| (v - 0.5).max(0.0)).collect();
+        let g = u[n..].iter().map(|v| 1e-3 * (v - 0.5)).collect();
         (p, g)
     }
 

@@ -8,13 +8,10 @@ use crate::elastic::operator::dense_apply;
 use crate::grid::Boundary;
 
 fn rough(ny: usize, nx: usize, seed: u64) -> Vec<f64> {
-    let mut s = seed;
+    let phases = crate::test_support::lcg(seed, 4);
     let mut h = vec![0.0; ny * nx];
     for k in 1..5 {
-        s = s
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        let ph = (s >> 11) as f64 / (1u64 << 53) as f64 * std::f64::consts::TAU;
+        let ph = phases[k - 1] * std::f64::consts::TAU;
         for i in 0..ny {
             for j in 0..nx {
                 let x = (i as f64 / ny as f64 + j as f64 / nx as f64 * 0.7) * k as f64;
