@@ -603,3 +603,8 @@ def make_directory(argument: str, directory: Path) -> Path:
             argument=argument,
         ) from None
     return directory
+
+
+def invalid(name: str, message: str) -> InvalidArgumentError:
+    """The error of argument ``name``: ``name: message``."""
+    return InvalidArgumentError(f"{name}: {message}", argument=name)

@@ -9,9 +9,10 @@ seal's leak rate follows as ``Q = K_eff (W/L) Δp/η`` [m³/s] for a liquid or t
 ideal-gas mass flow [kg/s]. ``docs/seal.md`` describes the mapping, the patch, the
 estimator, the configuration keys and the outputs.
 
-Modules: ``_config`` (typed configuration), ``_bodies`` (materials, roughness, patch,
-composite surfaces), ``_theory`` (Persson, Bruggeman), ``_estimate`` (upscaling, leak-rate
-formulas), ``_run`` (the run), ``_result`` (tables, files), ``_figures``.
+Modules: ``_config`` (typed configuration), ``_bodies`` (materials, roughness, spectra,
+patch, composite surfaces; one module each), ``_theory`` (Persson, Bruggeman),
+``_estimate`` (upscaling, leak-rate formulas), ``_run`` (the run), ``_result`` (tables,
+files), ``_figures``.
 """
 
 from ._config import (

@@ -55,6 +55,7 @@ from typing import Any
 
 import numpy as np
 
+from .._validate import invalid
 from ..errors import InvalidArgumentError
 
 __all__ = [
@@ -99,30 +100,26 @@ UNITS: dict[str, str] = {
 
 
 # ============================================================================ checks
-def _fail(name: str, message: str) -> InvalidArgumentError:
-    return InvalidArgumentError(f"{name}: {message}", argument=name)
-
-
 def _real(name: str, value: Any, *, positive: bool = False, low: float | None = None,
           high: float | None = None, open_high: bool = False) -> float:
     if isinstance(value, bool) or not isinstance(value, numbers.Real):
-        raise _fail(name, f"must be a number, got {value!r}")
+        raise invalid(name, f"must be a number, got {value!r}")
     x = float(value)
     if not math.isfinite(x):
-        raise _fail(name, f"must be finite, got {value!r}")
+        raise invalid(name, f"must be finite, got {value!r}")
     if positive and not x > 0:
-        raise _fail(name, f"must be > 0, got {value!r}")
+        raise invalid(name, f"must be > 0, got {value!r}")
     if low is not None and x < low:
-        raise _fail(name, f"must be ≥ {low:g}, got {value!r}")
+        raise invalid(name, f"must be ≥ {low:g}, got {value!r}")
     if high is not None and (x >= high if open_high else x > high):
-        raise _fail(name, f"must be {'<' if open_high else '≤'} {high:g}, got {value!r}")
+        raise invalid(name, f"must be {'<' if open_high else '≤'} {high:g}, got {value!r}")
     return x
 
 
 def _modulus(name: str, value: Any) -> float:
     """Young's modulus [Pa]: positive, or ``inf`` (a rigid body; TOML ``inf``)."""
     if isinstance(value, bool) or not isinstance(value, numbers.Real):
-        raise _fail(name, f"must be a number in Pa, got {value!r}")
+        raise invalid(name, f"must be a number in Pa, got {value!r}")
     x = float(value)
     if x == math.inf:
         return x
@@ -131,13 +128,13 @@ def _modulus(name: str, value: Any) -> float:
 
 def _integer(name: str, value: Any, low: int) -> int:
     if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < low:
-        raise _fail(name, f"must be an integer ≥ {low}, got {value!r}")
+        raise invalid(name, f"must be an integer ≥ {low}, got {value!r}")
     return int(value)
 
 
 def _boolean(name: str, value: Any) -> bool:
     if not isinstance(value, bool):
-        raise _fail(name, f"must be true or false, got {value!r}")
+        raise invalid(name, f"must be true or false, got {value!r}")
     return value
 
 
@@ -145,12 +142,12 @@ def _unknown(name: str, data: Mapping[str, Any], allowed: set[str]) -> None:
     for key in data:
         if key not in allowed:
             where = f"{name}.{key}" if name else str(key)
-            raise _fail(where, f"unknown key (allowed: {', '.join(sorted(allowed))})")
+            raise invalid(where, f"unknown key (allowed: {', '.join(sorted(allowed))})")
 
 
 def _table(name: str, value: Any) -> Mapping[str, Any]:
     if not isinstance(value, Mapping):
-        raise _fail(name, f"must be a table (TOML [{name}]), got {type(value).__name__}")
+        raise invalid(name, f"must be a table (TOML [{name}]), got {type(value).__name__}")
     return value
 
 
@@ -182,54 +179,54 @@ class BodySurface:
         kinds = [self.flat, self.files is not None, self.psd is not None,
                  any(v is not None for v in (self.hurst, self.rms_height, self.rms_slope))]
         if sum(bool(k) for k in kinds) == 0:
-            raise _fail(name, "give flat = true, files, psd, or hurst with rms_height/rms_slope")
+            raise invalid(name, "give flat = true, files, psd, or hurst with rms_height/rms_slope")
         if self.flat:
             _boolean(f"{name}.flat", self.flat)
             extra = [f.name for f in fields(self) if f.name != "flat"
                      and getattr(self, f.name) is not None]
             if extra:
-                raise _fail(f"{name}.{extra[0]}", "a flat body takes no roughness keys")
+                raise invalid(f"{name}.{extra[0]}", "a flat body takes no roughness keys")
             return self
         if self.files is not None:
             files = self.files
             if isinstance(files, (str, bytes)) or not all(
                 isinstance(f, (str, os.PathLike)) for f in files
             ) or not files:
-                raise _fail(f"{name}.files", f"must be a non-empty list of paths, got {files!r}")
+                raise invalid(f"{name}.files", f"must be a non-empty list of paths, got {files!r}")
             files = tuple(os.fspath(f) for f in files)
             for f in files:
                 if not Path(f).is_file():
-                    raise _fail(f"{name}.files", f"{f!r} is not a file")
+                    raise invalid(f"{name}.files", f"{f!r} is not a file")
             dx = None if self.dx is None else _real(f"{name}.dx", self.dx, positive=True)
             others = [k for k in ("hurst", "rms_height", "rms_slope", "rolloff_wavelength",
                                   "short_wavelength", "psd") if getattr(self, k) is not None]
             if others:
-                raise _fail(f"{name}.{others[0]}", "measured files take only dx besides files")
+                raise invalid(f"{name}.{others[0]}", "measured files take only dx besides files")
             return replace(self, files=files, dx=dx)
         if self.dx is not None:
-            raise _fail(f"{name}.dx", "dx is the spacing of measured files; give files too")
+            raise invalid(f"{name}.dx", "dx is the spacing of measured files; give files too")
         values: dict[str, Any] = {}
         if self.psd is not None:
             if not isinstance(self.psd, (str, os.PathLike)) or not Path(self.psd).is_file():
-                raise _fail(f"{name}.psd", f"must be a file (q [rad/m], C [m^4]), got "
+                raise invalid(f"{name}.psd", f"must be a file (q [rad/m], C [m^4]), got "
                             f"{self.psd!r}")
             values["psd"] = os.fspath(self.psd)
         if self.hurst is not None:
             values["hurst"] = _real(f"{name}.hurst", self.hurst, low=0.0, high=1.0,
                                     open_high=True)
             if values["hurst"] == 0.0:
-                raise _fail(f"{name}.hurst", "must be in (0, 1), got 0")
+                raise invalid(f"{name}.hurst", "must be in (0, 1), got 0")
         elif self.psd is None:
-            raise _fail(f"{name}.hurst", "required with rms_height or rms_slope")
+            raise invalid(f"{name}.hurst", "required with rms_height or rms_slope")
         if self.psd is None and (self.rms_height is None) == (self.rms_slope is None):
-            raise _fail(f"{name}.rms_height", "give exactly one of rms_height and rms_slope")
+            raise invalid(f"{name}.rms_height", "give exactly one of rms_height and rms_slope")
         for key in ("rms_height", "rms_slope", "rolloff_wavelength", "short_wavelength"):
             v = getattr(self, key)
             if v is not None:
                 values[key] = _real(f"{name}.{key}", v, positive=True)
         lr, ls = values.get("rolloff_wavelength"), values.get("short_wavelength")
         if lr is not None and ls is not None and not ls < lr:
-            raise _fail(f"{name}.short_wavelength",
+            raise invalid(f"{name}.short_wavelength",
                         f"must be below rolloff_wavelength = {lr:g} m, got {ls:g} m")
         return replace(self, **values)
 
@@ -249,12 +246,12 @@ class BodyMaterial:
         E = _modulus(f"{name}.E", self.E)  # noqa: N806
         nu = _real(f"{name}.nu", self.nu, low=-1.0, high=0.5)
         if nu == -1.0:
-            raise _fail(f"{name}.nu", "must be > -1")
+            raise invalid(f"{name}.nu", "must be > -1")
         hardness = self.hardness
         if hardness is not None:
             hardness = _real(f"{name}.hardness", hardness, positive=True)
             if not math.isfinite(hardness):
-                raise _fail(f"{name}.hardness", "must be finite (omit it for no cap)")
+                raise invalid(f"{name}.hardness", "must be finite (omit it for no cap)")
         return BodyMaterial(E, nu, hardness)
 
 
@@ -278,22 +275,22 @@ class Fluid:
         gas_keys = ("inlet_pressure", "outlet_pressure", "gas_constant", "temperature")
         if not gas:
             if self.pressure_drop is None:
-                raise _fail(f"{name}.pressure_drop", "required for a liquid (Pa)")
+                raise invalid(f"{name}.pressure_drop", "required for a liquid (Pa)")
             for k in gas_keys:
                 if getattr(self, k) is not None:
-                    raise _fail(f"{name}.{k}", "applies to a gas only (set gas = true)")
+                    raise invalid(f"{name}.{k}", "applies to a gas only (set gas = true)")
             return Fluid(eta, _real(f"{name}.pressure_drop", self.pressure_drop, positive=True))
         if self.pressure_drop is not None:
-            raise _fail(f"{name}.pressure_drop", "a gas takes inlet_pressure and "
+            raise invalid(f"{name}.pressure_drop", "a gas takes inlet_pressure and "
                         "outlet_pressure instead")
         vals = {}
         for k in gas_keys:
             v = getattr(self, k)
             if v is None:
-                raise _fail(f"{name}.{k}", "required for a gas")
+                raise invalid(f"{name}.{k}", "required for a gas")
             vals[k] = _real(f"{name}.{k}", v, low=0.0, positive=k != "outlet_pressure")
         if not vals["inlet_pressure"] > vals["outlet_pressure"]:
-            raise _fail(f"{name}.inlet_pressure", "must exceed outlet_pressure")
+            raise invalid(f"{name}.inlet_pressure", "must exceed outlet_pressure")
         return Fluid(eta, None, True, **vals)
 
 
@@ -368,64 +365,64 @@ class SealConfig:
         set_ = object.__setattr__
         for name, cls in (("upper", BodySurface), ("lower", BodySurface)):
             if not isinstance(getattr(self, name), cls):
-                raise _fail(f"surface.{name}", f"must be a {cls.__name__}")
+                raise invalid(f"surface.{name}", f"must be a {cls.__name__}")
             set_(self, name, getattr(self, name).check(f"surface.{name}"))
         for name in ("upper", "lower"):
             m = getattr(self, f"{name}_material")
             if not isinstance(m, BodyMaterial):
-                raise _fail(f"material.{name}", "must be a BodyMaterial")
+                raise invalid(f"material.{name}", "must be a BodyMaterial")
             set_(self, f"{name}_material", m.check(f"material.{name}"))
         if math.isinf(self.upper_material.E) and math.isinf(self.lower_material.E):
-            raise _fail("material.upper.E", "both bodies are rigid (E = inf); one must deform")
+            raise invalid("material.upper.E", "both bodies are rigid (E = inf); one must deform")
         p = self.mean_pressure
         if isinstance(p, (str, bytes)) or not hasattr(p, "__iter__"):
             p = (p,)
         p = tuple(_real("load.mean_pressure", v, positive=True) for v in p)
         if not p:
-            raise _fail("load.mean_pressure", "give at least one nominal pressure (Pa)")
+            raise invalid("load.mean_pressure", "give at least one nominal pressure (Pa)")
         if len(set(p)) != len(p):
-            raise _fail("load.mean_pressure", f"values must be distinct, got {list(p)}")
+            raise invalid("load.mean_pressure", f"values must be distinct, got {list(p)}")
         set_(self, "mean_pressure", tuple(sorted(p)))
         h = self.hardness
         if h is not None and p and max(p) > h:
             side = "lower" if self.lower_material.hardness == h else "upper"
-            raise _fail(
+            raise invalid(
                 f"material.{side}.hardness",
                 f"{h!r} Pa is below the largest load.mean_pressure {max(p)!r} Pa; a perfectly "
                 "plastic surface carries at most the hardness",
             )
         if not isinstance(self.fluid, Fluid):
-            raise _fail("fluid", "must be a Fluid")
+            raise invalid("fluid", "must be a Fluid")
         set_(self, "fluid", self.fluid.check())
         if not isinstance(self.seal, SealGeometry):
-            raise _fail("seal", "must be a SealGeometry")
+            raise invalid("seal", "must be a SealGeometry")
         set_(self, "seal", self.seal.check())
         files = [b.files for b in (self.upper, self.lower) if b.files is not None]
         if len(files) == 2 and len(files[0]) != len(files[1]):
-            raise _fail("surface.lower.files", f"{len(files[1])} files do not pair up with the "
+            raise invalid("surface.lower.files", f"{len(files[1])} files do not pair up with the "
                         f"{len(files[0])} of surface.upper.files")
         if self.realisations is None:
             set_(self, "realisations", len(files[0]) if files else 16)
         else:
             r = _integer("surface.realisations", self.realisations, 1)
             if files and r > len(files[0]):
-                raise _fail("surface.realisations", f"{r} exceeds the {len(files[0])} files")
+                raise invalid("surface.realisations", f"{r} exceeds the {len(files[0])} files")
             set_(self, "realisations", r)
         set_(self, "seed", _integer("surface.seed", self.seed, 0))
         if self.n is not None:
             n = _integer("surface.n", self.n, 8)
             if n & (n - 1):
-                raise _fail("surface.n", f"must be a power of two, got {n}")
+                raise invalid("surface.n", f"must be a power of two, got {n}")
             set_(self, "n", n)
         if self.length is not None:
             set_(self, "length", _real("surface.length", self.length, positive=True))
         if self.boundary not in ("periodic", "free"):
-            raise _fail("surface.boundary", f"must be 'periodic' or 'free', got "
+            raise invalid("surface.boundary", f"must be 'periodic' or 'free', got "
                         f"{self.boundary!r}")
         if isinstance(self.axis, bool) or self.axis not in _AXES:
-            raise _fail("flow.axis", f"must be 0, 1 or \"both\", got {self.axis!r}")
+            raise invalid("flow.axis", f"must be 0, 1 or \"both\", got {self.axis!r}")
         if not isinstance(self.check, ConvergenceCheck):
-            raise _fail("check", "must be a ConvergenceCheck")
+            raise invalid("check", "must be a ConvergenceCheck")
         chk = self.check.check()
         if files and chk.realisations:
             chk = replace(chk, realisations=0)  # measured files cannot be refined
@@ -512,7 +509,7 @@ def _body(name: str, data: Mapping[str, Any], base: Path | None) -> BodySurface:
     if "files" in kw:
         files = kw["files"]
         if isinstance(files, (str, bytes)) or not isinstance(files, (list, tuple)):
-            raise _fail(f"{name}.files", f"must be a list of paths, got {files!r}")
+            raise invalid(f"{name}.files", f"must be a list of paths, got {files!r}")
         kw["files"] = tuple(_resolve(f, base, f"{name}.files") for f in files)
     if "psd" in kw:
         kw["psd"] = _resolve(kw["psd"], base, f"{name}.psd")
@@ -521,7 +518,7 @@ def _body(name: str, data: Mapping[str, Any], base: Path | None) -> BodySurface:
 
 def _resolve(path: Any, base: Path | None, name: str) -> str:
     if not isinstance(path, (str, os.PathLike)):
-        raise _fail(name, f"must be a path, got {path!r}")
+        raise invalid(name, f"must be a path, got {path!r}")
     p = Path(path).expanduser()
     if base is not None and not p.is_absolute():
         p = base / p
@@ -558,13 +555,13 @@ def _from_dict(data: Mapping[str, Any], base: Path | None) -> SealConfig:
                         "check"})
     for required in ("surface", "material", "load", "fluid", "seal"):
         if required not in data:
-            raise _fail(required, f"the [{required}] table is missing")
+            raise invalid(required, f"the [{required}] table is missing")
     surface = _table("surface", data["surface"])
     _unknown("surface", surface, _RUN_KEYS | _BODY_KEYS | {"upper", "lower"})
     direct = {k: v for k, v in surface.items() if k in _BODY_KEYS}
     two = {k for k in ("upper", "lower") if k in surface}
     if direct and two:
-        raise _fail(f"surface.{next(iter(direct))}", "give the roughness either directly under "
+        raise invalid(f"surface.{next(iter(direct))}", "give the roughness either directly under "
                     "[surface] or in [surface.upper]/[surface.lower], not both")
     if direct:
         upper = BodySurface(flat=True)
@@ -572,7 +569,7 @@ def _from_dict(data: Mapping[str, Any], base: Path | None) -> SealConfig:
     else:
         if two != {"upper", "lower"}:
             missing = ({"upper", "lower"} - two).pop()
-            raise _fail(f"surface.{missing}", "missing (flat = true for a smooth body)")
+            raise invalid(f"surface.{missing}", "missing (flat = true for a smooth body)")
         upper = _body("surface.upper", _table("surface.upper", surface["upper"]), base)
         lower = _body("surface.lower", _table("surface.lower", surface["lower"]), base)
     material = _table("material", data["material"])
@@ -580,26 +577,26 @@ def _from_dict(data: Mapping[str, Any], base: Path | None) -> SealConfig:
     mats = {}
     for side in ("upper", "lower"):
         if side not in material:
-            raise _fail(f"material.{side}", "missing (E [Pa], nu)")
+            raise invalid(f"material.{side}", "missing (E [Pa], nu)")
         m = _table(f"material.{side}", material[side])
         _unknown(f"material.{side}", m, {"E", "nu", "hardness"})
         for k in ("E", "nu"):
             if k not in m:
-                raise _fail(f"material.{side}.{k}", "required")
+                raise invalid(f"material.{side}.{k}", "required")
         mats[side] = BodyMaterial(m["E"], m["nu"], m.get("hardness"))
     load = _table("load", data["load"])
     _unknown("load", load, {"mean_pressure"})
     if "mean_pressure" not in load:
-        raise _fail("load.mean_pressure", "required (Pa)")
+        raise invalid("load.mean_pressure", "required (Pa)")
     fluid = _table("fluid", data["fluid"])
     _unknown("fluid", fluid, {f.name for f in fields(Fluid)})
     if "viscosity" not in fluid:
-        raise _fail("fluid.viscosity", "required (Pa s)")
+        raise invalid("fluid.viscosity", "required (Pa s)")
     seal = _table("seal", data["seal"])
     _unknown("seal", seal, {"length", "width"})
     for k in ("length", "width"):
         if k not in seal:
-            raise _fail(f"seal.{k}", "required (m)")
+            raise invalid(f"seal.{k}", "required (m)")
     flow = _table("flow", data.get("flow", {}))
     _unknown("flow", flow, {"axis"})
     check = _table("check", data.get("check", {}))
