@@ -68,6 +68,22 @@ pub fn try_zeroed<T: Zeroed>(n: usize, what: &str) -> Result<Vec<T>> {
     }
 }
 
+/// `vec![0.0; n]` with its pages faulted in here, zeros written by every thread in fixed
+/// chunks. A `calloc`ed buffer is faulted in page by page wherever it is first written, and
+/// inside a solver's parallel loops each fault stalls one thread while the other waits at
+/// the loop's end: at 4097² the flow's working vectors took some 0.5 s longer that way
+/// (docs/flow.md, "Fresh pages").
+pub fn zeroed_now(n: usize) -> Vec<f64> {
+    use rayon::prelude::*;
+    let mut v: Vec<f64> = Vec::with_capacity(n);
+    v.spare_capacity_mut()
+        .par_chunks_mut(1 << 16)
+        .for_each(|c| c.iter_mut().for_each(|e| _ = e.write(0.0)));
+    // SAFETY: every one of the `n` values of the capacity was written just above.
+    unsafe { v.set_len(n) };
+    v
+}
+
 /// A `Vec` of `n` copies of `value`, or `Error::TooLarge` when the allocator refuses.
 pub fn try_filled<T: Clone>(n: usize, value: T, what: &str) -> Result<Vec<T>> {
     let mut v = try_with_capacity(n, what)?;

@@ -6,6 +6,7 @@ use std::time::Instant;
 use rayon::prelude::*;
 
 use super::assemble::two_sum;
+use crate::alloc::zeroed_now;
 use crate::error::{Error, Result};
 
 /// Whether `LEAKPATH_FLOW_PROFILE` is set: stage timings of the flow solvers (the factor's
@@ -61,7 +62,7 @@ pub struct Outcome {
 
 /// The vectors of [`refined`], allocated once for a whole solve (like [`Inner`]'s):
 /// allocated afresh for every step, a 10-million-unknown grid faulted in and zeroed some
-/// 0.5 GB each time.
+/// 0.5 GB each time. Faulted in when allocated ([`zeroed_now`]), not inside the solve.
 pub struct Work {
     /// The residual (the inner solve's right-hand side) and the correction.
     r: Vec<f64>,
@@ -72,8 +73,8 @@ impl Work {
     /// The vectors for systems of `n` unknowns.
     pub fn new(n: usize) -> Self {
         Work {
-            r: vec![0.0; n],
-            d: vec![0.0; n],
+            r: zeroed_now(n),
+            d: zeroed_now(n),
         }
     }
 }
@@ -90,9 +91,9 @@ impl Inner {
     /// The vectors for systems of `n` unknowns.
     pub fn new(n: usize) -> Self {
         Inner {
-            z: vec![0.0; n],
-            p: vec![0.0; n],
-            q: vec![0.0; n],
+            z: zeroed_now(n),
+            p: zeroed_now(n),
+            q: zeroed_now(n),
         }
     }
 }

@@ -4,6 +4,8 @@
 
 use rayon::prelude::*;
 
+use crate::alloc::zeroed_now;
+
 use super::*;
 
 /// Largest net flux out of a cell, relative to the flow rate, of a returned solution.
@@ -56,13 +58,13 @@ pub(super) fn solve_direct(
     b_out: &[f64],
 ) -> DirectAnswer {
     let n = b_in.len();
-    let (mut x, mut psi) = (vec![0.0; n], vec![0.0; n]);
+    let (mut x, mut psi) = (zeroed_now(n), zeroed_now(n));
     let t0 = std::time::Instant::now();
     f.solve_pair(b_in, b_out, &mut x, &mut psi);
     if cg::profiling() {
         eprintln!("flow: two-column solve {:.3} s", cg::secs(t0));
     }
-    let (mut r_x, mut r_psi) = (vec![0.0; n], vec![0.0; n]);
+    let (mut r_x, mut r_psi) = (zeroed_now(n), zeroed_now(n));
     st.residual_compensated(&x, b_in, &mut r_x);
     st.residual_compensated(&psi, b_out, &mut r_psi);
     DirectAnswer {
@@ -96,7 +98,7 @@ pub(super) fn split_direct(
     trust: f64,
 ) -> DirectAnswer {
     let n = b_in.len();
-    a.lo = (vec![0.0; n], vec![0.0; n]);
+    a.lo = (zeroed_now(n), zeroed_now(n));
     for step in 0..DIRECT_SPLIT {
         if cg::profiling() {
             eprintln!("flow: refinement step {} in two doubles", step + 1);
@@ -310,9 +312,9 @@ pub(super) fn solve_multigrid(
     let mut correction = Correction::new(mg, opts.should_stop);
     let mut correct =
         |r: &mut [f64], d: &mut [f64], max_iter: usize| correction.correct(r, d, max_iter);
-    let mut x = vec![0.0; n];
+    let mut x = zeroed_now(n);
     // φ carried as two doubles: `1 − φ` then keeps its digits where φ is near 1.
-    let mut lo = vec![0.0; n];
+    let mut lo = zeroed_now(n);
     let exact = |x: &[&[f64]], b: &[f64], r: &mut [f64]| mg.residual_exact(x, b, r);
     let a = cg::refined(
         &exact,
@@ -401,8 +403,8 @@ impl<'a> Correction<'a> {
             mg,
             should_stop,
             inner: cg::Inner::new(m),
-            s: vec![0.0; own],
-            xs: vec![0.0; own],
+            s: zeroed_now(own),
+            xs: zeroed_now(own),
         }
     }
 

@@ -119,6 +119,7 @@ use rayon::prelude::*;
 
 use super::assemble::Stencil;
 use super::cg::{profiling, secs, CHUNK};
+use crate::alloc::zeroed_now;
 use coarsen::{split, strong, strongest};
 #[cfg(test)]
 use coarsen::{split_in_blocks, split_with, SPLIT_BLOCK};
@@ -676,9 +677,9 @@ impl Multigrid {
                 let n = if reduction.is_some() { g.n } else { 0 };
                 let own = if l == 0 { 0 } else { n };
                 Buffers {
-                    x: vec![0.0; own],
-                    b: vec![0.0; own],
-                    r: vec![0.0; n],
+                    x: zeroed_now(own),
+                    b: zeroed_now(own),
+                    r: zeroed_now(n),
                 }
             })
             .collect();
