@@ -71,8 +71,7 @@ pub fn try_zeroed<T: Zeroed>(n: usize, what: &str) -> Result<Vec<T>> {
 /// `vec![0.0; n]` with its pages faulted in here, zeros written by every thread in fixed
 /// chunks. A `calloc`ed buffer is faulted in page by page wherever it is first written, and
 /// inside a solver's parallel loops each fault stalls one thread while the other waits at
-/// the loop's end: at 4097² the flow's working vectors took some 0.5 s longer that way
-/// (docs/flow.md, "Fresh pages").
+/// the loop's end (docs/flow.md, "Fresh pages", has the flow's figures at 4097²).
 pub fn zeroed_now(n: usize) -> Vec<f64> {
     use rayon::prelude::*;
     let mut v: Vec<f64> = Vec::with_capacity(n);

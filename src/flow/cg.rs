@@ -117,13 +117,14 @@ pub type PartsResidual<'a> = &'a dyn Fn(&[&[f64]], &[f64], &mut [f64]);
 /// drifts from `b − A x` in floating point; a correction short of `tol` only makes the next
 /// refinement step gain less).
 /// `r` holds `b` on entry and the recurrence residual on return (the caller needs `b` no
-/// more: one vector less). `converged` is false when `max_iter` is reached first,
+/// more: one vector less); `r_norm` is `‖r‖₂` on entry when the caller has it already. `converged` is false when `max_iter` is reached first,
 /// `residual` is the recurrence's. `b = 0` gives `x = 0`.
 #[allow(clippy::too_many_arguments)]
 pub fn pcg(
     apply: &mut dyn FnMut(&[f64], &mut [f64]),
     precond: &mut dyn FnMut(&[f64], &mut [f64]),
     r: &mut [f64],
+    r_norm: Option<f64>,
     x: &mut [f64],
     tol: f64,
     max_iter: usize,
@@ -132,7 +133,7 @@ pub fn pcg(
 ) -> Result<Outcome> {
     let n = r.len();
     x.par_iter_mut().for_each(|v| *v = 0.0);
-    let bnorm = dot(r, r).sqrt();
+    let bnorm = r_norm.unwrap_or_else(|| dot(r, r).sqrt());
     if bnorm == 0.0 {
         return Ok(Outcome {
             iterations: 0,
@@ -221,11 +222,11 @@ const FLOOR_ACCEPT: f64 = 1e2;
 /// Refinement steps at most in [`refined`].
 const REFINE_STEPS: usize = 8;
 
-/// The inner solve of [`refined`]: `correct(r, δ, max_iter)` sets `δ` to an approximate
-/// solution of `A δ = r` (preconditioned CG from 0 to a relative residual [`INNER_TOL`] in
+/// The inner solve of [`refined`]: `correct(r, ‖r‖₂, δ, max_iter)` sets `δ` to an
+/// approximate solution of `A δ = r` (preconditioned CG from 0 to a relative residual [`INNER_TOL`] in
 /// plain arithmetic, on `A` or on a reduced system; `r` may be overwritten) within
 /// `max_iter` iterations.
-pub type Correct<'a> = &'a mut dyn FnMut(&mut [f64], &mut [f64], usize) -> Result<Outcome>;
+pub type Correct<'a> = &'a mut dyn FnMut(&mut [f64], f64, &mut [f64], usize) -> Result<Outcome>;
 
 /// Iterative refinement around an inner solve ([`pcg`] through `correct`): from `x`,
 /// repeatedly the residual `r = b − A x` recomputed by `exact` (summed exactly: not swamped
@@ -280,7 +281,8 @@ pub fn refined(
             _ if step == 0 && all_zero(x) => r.copy_from_slice(b),
             _ => exact(&[x], b, r),
         }
-        let rel = dot(r, r).sqrt() / bnorm;
+        let r_norm = dot(r, r).sqrt();
+        let rel = r_norm / bnorm;
         let m = measure(x, r);
         if profiling() {
             eprintln!(
@@ -317,7 +319,7 @@ pub fn refined(
         last = m;
         last_rel = rel;
         step += 1;
-        it += correct(r, d, max_iter - it)?.iterations;
+        it += correct(r, r_norm, d, max_iter - it)?.iterations;
         match lo.as_deref_mut() {
             Some(lo) => add_split(d, x, lo),
             None => axpy(1.0, d, x),

@@ -310,8 +310,9 @@ pub(super) fn solve_multigrid(
     }
     let mut work = cg::Work::new(n);
     let mut correction = Correction::new(mg, opts.should_stop);
-    let mut correct =
-        |r: &mut [f64], d: &mut [f64], max_iter: usize| correction.correct(r, d, max_iter);
+    let mut correct = |r: &mut [f64], r_norm: f64, d: &mut [f64], max_iter: usize| {
+        correction.correct(r, r_norm, d, max_iter)
+    };
     let mut x = zeroed_now(n);
     // φ carried as two doubles: `1 − φ` then keeps its digits where φ is near 1.
     let mut lo = zeroed_now(n);
@@ -408,14 +409,21 @@ impl<'a> Correction<'a> {
         }
     }
 
-    /// `d ≈ A⁻¹ r` (`r` is overwritten without a reduction).
-    fn correct(&mut self, r: &mut [f64], d: &mut [f64], max_iter: usize) -> Result<cg::Outcome> {
+    /// `d ≈ A⁻¹ r` (`r` is overwritten without a reduction); `r_norm` is `‖r‖₂`.
+    fn correct(
+        &mut self,
+        r: &mut [f64],
+        r_norm: f64,
+        d: &mut [f64],
+        max_iter: usize,
+    ) -> Result<cg::Outcome> {
         let mg = self.mg;
         if mg.reduced_len().is_none() {
             return cg::pcg(
                 &mut |v, y| mg.operator(v, y),
                 &mut |r, z| mg.precondition(r, z),
                 r,
+                Some(r_norm),
                 d,
                 cg::INNER_TOL,
                 max_iter,
@@ -426,7 +434,7 @@ impl<'a> Correction<'a> {
         mg.reduce(r, &mut self.s);
         // The fine residual after the correction is `(0, s − S δ_B)`: CG on `S` stops where
         // that is `INNER_TOL` of the fine `r`, as CG on `A` would.
-        let (rn, sn) = (cg::dot(r, r).sqrt(), cg::dot(&self.s, &self.s).sqrt());
+        let (rn, sn) = (r_norm, cg::dot(&self.s, &self.s).sqrt());
         let tol = if sn > 0.0 {
             cg::INNER_TOL * rn / sn
         } else {
@@ -436,6 +444,7 @@ impl<'a> Correction<'a> {
             &mut |v, y| mg.reduced_product(v, y),
             &mut |s, z| mg.cycle(s, z),
             &mut self.s,
+            Some(sn),
             &mut self.xs,
             tol,
             max_iter,
@@ -453,7 +462,7 @@ struct Sparse(Vec<(u32, f64)>);
 impl Sparse {
     fn of(v: &[f64]) -> Self {
         Sparse(
-            v.iter()
+            v.par_iter()
                 .enumerate()
                 .filter(|e| *e.1 != 0.0)
                 .map(|(i, &w)| (i as u32, w))
