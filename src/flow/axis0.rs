@@ -231,7 +231,11 @@ pub(super) fn solve_axis0(
         let mg = Multigrid::new(fine);
         levels = mg.n_levels();
         // The reservoirs' vectors on the unknowns; the cell-sized ones are not read again.
-        let (b_in, b_o) = (mg.gather(&rhs), mg.gather(&b_out));
+        // `rhs` is 0 off the inlet row and `b_out` off the outlet row (above).
+        let (b_in, b_o) = (
+            mg.gather_from(&rhs, 0..nx),
+            mg.gather_from(&b_out, (ny - 1) * nx..n),
+        );
         (rhs, b_out) = (Vec::new(), Vec::new());
         let (x, psi, residual, it) = solve_multigrid(&mg, b_in, b_o, opts, max_iter)??;
         iterations = it;

@@ -275,15 +275,25 @@ pub fn refined(
     loop {
         let t0 = Instant::now();
         // `lo` is zero until the first correction: the residual of `x` alone is the same,
-        // and from `x = 0` it is `b` exactly.
+        // and from `x = 0` it is `b` exactly, of relative norm 1: the measure is then not
+        // needed unless `tol ≥ 1` (only the convergence test reads the first step's).
+        let from_zero = step == 0 && bnorm.is_finite() && all_zero(x);
         match lo.as_deref() {
             Some(lo) if step > 0 => exact(&[x, lo], b, r),
-            _ if step == 0 && all_zero(x) => r.copy_from_slice(b),
+            _ if from_zero => r.copy_from_slice(b),
             _ => exact(&[x], b, r),
         }
-        let r_norm = dot(r, r).sqrt();
-        let rel = r_norm / bnorm;
-        let m = measure(x, r);
+        let (r_norm, rel) = if from_zero {
+            (bnorm, 1.0)
+        } else {
+            let r_norm = dot(r, r).sqrt();
+            (r_norm, r_norm / bnorm)
+        };
+        let m = if from_zero && rel > tol {
+            f64::INFINITY
+        } else {
+            measure(x, r)
+        };
         if profiling() {
             eprintln!(
                 "[flow profile] refinement step {step}: residual {rel:.2e}, measure {m:.2e}, \

@@ -792,6 +792,19 @@ impl Multigrid {
             .collect()
     }
 
+    /// [`Multigrid::gather`] of a cell vector that is 0 outside the cells `cells` (a
+    /// reservoir's row): only those are read.
+    pub fn gather_from(&self, v: &[f64], cells: std::ops::Range<usize>) -> Vec<f64> {
+        let mut out = zeroed_now(self.cells.len());
+        for k in cells {
+            let i = self.index[k];
+            if i != NONE {
+                out[i as usize] = v[k];
+            }
+        }
+        out
+    }
+
     /// The cell vector with `x` (one entry per unknown) on the unknowns' cells, 0 elsewhere.
     pub fn scatter(&self, x: &[f64]) -> Vec<f64> {
         let mut z = vec![0.0; self.index.len()];
