@@ -117,8 +117,9 @@ pub type PartsResidual<'a> = &'a dyn Fn(&[&[f64]], &[f64], &mut [f64]);
 /// drifts from `b − A x` in floating point; a correction short of `tol` only makes the next
 /// refinement step gain less).
 /// `r` holds `b` on entry and the recurrence residual on return (the caller needs `b` no
-/// more: one vector less); `r_norm` is `‖r‖₂` on entry when the caller has it already. `converged` is false when `max_iter` is reached first,
-/// `residual` is the recurrence's. `b = 0` gives `x = 0`.
+/// more: one vector less); `r_norm` is `‖r‖₂` on entry when the caller has it already.
+/// `converged` is false when `max_iter` is reached first, `residual` is the recurrence's.
+/// `b = 0` gives `x = 0`.
 #[allow(clippy::too_many_arguments)]
 pub fn pcg(
     apply: &mut dyn FnMut(&[f64], &mut [f64]),
@@ -223,9 +224,9 @@ const FLOOR_ACCEPT: f64 = 1e2;
 const REFINE_STEPS: usize = 8;
 
 /// The inner solve of [`refined`]: `correct(r, ‖r‖₂, δ, max_iter)` sets `δ` to an
-/// approximate solution of `A δ = r` (preconditioned CG from 0 to a relative residual [`INNER_TOL`] in
-/// plain arithmetic, on `A` or on a reduced system; `r` may be overwritten) within
-/// `max_iter` iterations.
+/// approximate solution of `A δ = r` (preconditioned CG from 0 to a relative residual
+/// [`INNER_TOL`] in plain arithmetic, on `A` or on a reduced system; `r` may be
+/// overwritten) within `max_iter` iterations.
 pub type Correct<'a> = &'a mut dyn FnMut(&mut [f64], f64, &mut [f64], usize) -> Result<Outcome>;
 
 /// Iterative refinement around an inner solve ([`pcg`] through `correct`): from `x`,
