@@ -111,8 +111,8 @@ fn dense_reference(
     (p, q)
 }
 
-#[test]
-fn matches_dense_cholesky_reference() {
+/// Rates and pressures against the dense reference, `solver` forced.
+fn matches_dense_cholesky_reference_with(solver: Solver) {
     for (seed, ny, nx, periodic, closed) in [
         (1, 30, 41, false, 0.3),
         (2, 45, 45, true, 0.35),
@@ -121,7 +121,7 @@ fn matches_dense_cholesky_reference() {
     ] {
         let gap = random_gap(seed, ny * nx, closed);
         let pr = problem(&gap, ny, nx, 0, periodic);
-        let sol = solve(&pr, &Options::default()).unwrap();
+        let sol = solve(&pr, &forced(solver)).unwrap();
         let (p, q) = dense_reference(&gap, ny, nx, periodic, pr.viscosity, pr.pressure_drop);
         if q == 0.0 {
             assert_eq!(sol.flow_rate, 0.0);
@@ -134,87 +134,45 @@ fn matches_dense_cholesky_reference() {
             }
         }
     }
+}
+
+#[test]
+fn matches_dense_cholesky_reference() {
+    matches_dense_cholesky_reference_with(Solver::Auto);
 }
 
 #[test]
 fn matches_dense_cholesky_reference_multigrid() {
-    for (seed, ny, nx, periodic, closed) in [
-        (1, 30, 41, false, 0.3),
-        (2, 45, 45, true, 0.35),
-        (4, 70, 20, false, 0.2),
-        (6, 3, 90, true, 0.4),
-    ] {
-        let gap = random_gap(seed, ny * nx, closed);
-        let pr = problem(&gap, ny, nx, 0, periodic);
-        let sol = solve(
-            &pr,
-            &Options {
-                solver: Solver::Multigrid,
-                ..Options::default()
-            },
-        )
-        .unwrap();
-        let (p, q) = dense_reference(&gap, ny, nx, periodic, pr.viscosity, pr.pressure_drop);
-        if q == 0.0 {
-            assert_eq!(sol.flow_rate, 0.0);
-            continue;
-        }
-        assert!(rel(sol.flow_rate, q) < 1e-10, "{} vs {q}", sol.flow_rate);
-        for k in 0..ny * nx {
-            if !p[k].is_nan() {
-                assert!((sol.pressure[k] - p[k]).abs() < 1e-10 * pr.pressure_drop);
-            }
-        }
-    }
+    matches_dense_cholesky_reference_with(Solver::Multigrid);
+}
+
+/// The same bits on one and two threads, `solver` forced.
+fn same_bits_on_one_and_two_threads_with(solver: Solver) {
+    let (ny, nx) = (300, 260);
+    let gap = random_gap(11, ny * nx, 0.3);
+    let run = |t: usize| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(t)
+            .build()
+            .unwrap();
+        pool.install(|| solve(&problem(&gap, ny, nx, 0, true), &forced(solver)).unwrap())
+    };
+    let (a, b) = (run(1), run(2));
+    assert_eq!(a.flow_rate.to_bits(), b.flow_rate.to_bits());
+    assert_eq!(a.iterations, b.iterations);
+    assert!(a
+        .pressure
+        .iter()
+        .zip(&b.pressure)
+        .all(|(x, y)| x.to_bits() == y.to_bits()));
 }
 
 #[test]
 fn same_bits_on_one_and_two_threads() {
-    let (ny, nx) = (300, 260);
-    let gap = random_gap(11, ny * nx, 0.3);
-    let run = |t: usize| {
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(t)
-            .build()
-            .unwrap();
-        pool.install(|| solve(&problem(&gap, ny, nx, 0, true), &Options::default()).unwrap())
-    };
-    let (a, b) = (run(1), run(2));
-    assert_eq!(a.flow_rate.to_bits(), b.flow_rate.to_bits());
-    assert_eq!(a.iterations, b.iterations);
-    assert!(a
-        .pressure
-        .iter()
-        .zip(&b.pressure)
-        .all(|(x, y)| x.to_bits() == y.to_bits()));
+    same_bits_on_one_and_two_threads_with(Solver::Auto);
 }
 
 #[test]
 fn same_bits_on_one_and_two_threads_multigrid() {
-    let (ny, nx) = (300, 260);
-    let gap = random_gap(11, ny * nx, 0.3);
-    let run = |t: usize| {
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(t)
-            .build()
-            .unwrap();
-        pool.install(|| {
-            solve(
-                &problem(&gap, ny, nx, 0, true),
-                &Options {
-                    solver: Solver::Multigrid,
-                    ..Options::default()
-                },
-            )
-            .unwrap()
-        })
-    };
-    let (a, b) = (run(1), run(2));
-    assert_eq!(a.flow_rate.to_bits(), b.flow_rate.to_bits());
-    assert_eq!(a.iterations, b.iterations);
-    assert!(a
-        .pressure
-        .iter()
-        .zip(&b.pressure)
-        .all(|(x, y)| x.to_bits() == y.to_bits()));
+    same_bits_on_one_and_two_threads_with(Solver::Multigrid);
 }
