@@ -148,13 +148,9 @@ fn bad_inputs_are_errors() {
 fn caller_kernel_table_and_incremental_finish() {
     let (ny, nx) = (48usize, 45usize);
     let h = rough(ny, nx, 21);
-    let (hmax, hmin, hsum) = height_stats(&h);
     for boundary in [Boundary::Free, Boundary::Periodic] {
         let pr = problem(&h, ny, nx, boundary);
-        let top = match boundary {
-            Boundary::Free => hmax - hmin,
-            Boundary::Periodic => hmax - hsum / (ny * nx) as f64,
-        };
+        let top = approach_range(&h, boundary);
         let (op, table) = match boundary {
             Boundary::Free => {
                 let k = Kernel::new(ny, nx, pr.dx, pr.e_star);

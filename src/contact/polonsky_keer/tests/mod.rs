@@ -127,6 +127,16 @@ fn dense_reference(c: &[f64], b: &[f64]) -> Vec<f64> {
     panic!("dense reference did not converge");
 }
 
+/// The largest approach of a solve: `max h − min h` on a free surface, `max h − mean h`
+/// (full contact) on a periodic one.
+fn approach_range(h: &[f64], boundary: Boundary) -> f64 {
+    let (hmax, hmin, hsum) = height_stats(h);
+    match boundary {
+        Boundary::Free => hmax - hmin,
+        Boundary::Periodic => hmax - hsum / h.len() as f64,
+    }
+}
+
 fn max_rel(a: &[f64], b: &[f64]) -> f64 {
     let s = b.iter().fold(0.0f64, |m, v| m.max(v.abs()));
     a.iter()

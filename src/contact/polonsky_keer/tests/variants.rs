@@ -162,14 +162,10 @@ fn preconditioned_and_plain_reach_the_same_minimiser() {
     // iterations; both iterations must land on the same contact set and pressures.
     let (ny, nx) = (48usize, 40usize);
     let h = rough(ny, nx, 7);
-    let (hmax, hmin, hsum) = height_stats(&h);
     let mut used = 0;
     for boundary in [Boundary::Free, Boundary::Periodic] {
         let pr = problem(&h, ny, nx, boundary);
-        let top = match boundary {
-            Boundary::Free => hmax - hmin,
-            Boundary::Periodic => hmax - hsum / (ny * nx) as f64,
-        };
+        let top = approach_range(&h, boundary);
         for frac in [0.2, 0.5, 0.9] {
             let delta = frac * top;
             let plain = Options {
@@ -196,13 +192,10 @@ fn coarse_start_and_cold_start_reach_the_same_minimiser() {
     // Large enough for two coarse levels (97 → 49 → 25 per side).
     let (ny, nx) = (97usize, 100usize);
     let h = rough(ny, nx, 13);
-    let (hmax, hmin, hsum) = height_stats(&h);
+    let (hmax, hmin, _) = height_stats(&h);
     for boundary in [Boundary::Free, Boundary::Periodic] {
         let pr = problem(&h, ny, nx, boundary);
-        let top = match boundary {
-            Boundary::Free => hmax - hmin,
-            Boundary::Periodic => hmax - hsum / (ny * nx) as f64,
-        };
+        let top = approach_range(&h, boundary);
         let mut controls: Vec<Control> = [0.1, 0.3, 0.6]
             .iter()
             .map(|f| Control::Approach(f * top))
