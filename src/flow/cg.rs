@@ -117,7 +117,7 @@ pub type PartsResidual<'a> = &'a dyn Fn(&[&[f64]], &[f64], &mut [f64]);
 /// drifts from `b − A x` in floating point; a correction short of `tol` only makes the next
 /// refinement step gain less).
 /// `r` holds `b` on entry and the recurrence residual on return (the caller needs `b` no
-/// more: one vector less); `r_norm` is `‖r‖₂` on entry when the caller has it already.
+/// more: one vector less); `bnorm` is `‖r‖₂` on entry (the caller has it already).
 /// `converged` is false when `max_iter` is reached first, `residual` is the recurrence's.
 /// `b = 0` gives `x = 0`.
 #[allow(clippy::too_many_arguments)]
@@ -125,7 +125,7 @@ pub fn pcg(
     apply: &mut dyn FnMut(&[f64], &mut [f64]),
     precond: &mut dyn FnMut(&[f64], &mut [f64]),
     r: &mut [f64],
-    r_norm: Option<f64>,
+    bnorm: f64,
     x: &mut [f64],
     tol: f64,
     max_iter: usize,
@@ -134,7 +134,6 @@ pub fn pcg(
 ) -> Result<Outcome> {
     let n = r.len();
     x.par_iter_mut().for_each(|v| *v = 0.0);
-    let bnorm = r_norm.unwrap_or_else(|| dot(r, r).sqrt());
     if bnorm == 0.0 {
         return Ok(Outcome {
             iterations: 0,
