@@ -83,6 +83,79 @@ pub fn zeroed_now(n: usize) -> Vec<f64> {
     v
 }
 
+/// Zeroed `f64` vectors made ahead of their use by a thread of their own, started where the
+/// caller's work leaves a core idle (a sequential stretch): their page faults and zeroing
+/// are then off the critical path. Taken by length, each once; a length not made ahead (or
+/// all of them, when the system refuses the thread) is made by [`zeroed_now`] when taken.
+pub struct ZeroedAhead {
+    pending: Option<std::thread::JoinHandle<Vec<Vec<f64>>>>,
+    ready: Vec<Vec<f64>>,
+}
+
+impl ZeroedAhead {
+    /// Nothing made ahead: every [`ZeroedAhead::take`] is a [`zeroed_now`].
+    pub fn none() -> Self {
+        ZeroedAhead {
+            pending: None,
+            ready: Vec::new(),
+        }
+    }
+
+    /// Starts making zeroed vectors of the lengths `lens`, on one thread, in order.
+    pub fn start(lens: Vec<usize>) -> Self {
+        if lens.iter().all(|&n| n == 0) {
+            return Self::none();
+        }
+        let made = std::thread::Builder::new()
+            .name("leakpath-zeroed-ahead".into())
+            .spawn(move || {
+                lens.into_iter()
+                    .map(|n| {
+                        // Written, not `calloc`ed: the point is to fault the pages in here.
+                        let mut v = Vec::with_capacity(n);
+                        v.resize(n, 0.0);
+                        v
+                    })
+                    .collect()
+            });
+        ZeroedAhead {
+            pending: made.ok(),
+            ready: Vec::new(),
+        }
+    }
+
+    /// A zeroed vector of length `n`: one made ahead, else [`zeroed_now`]`(n)`.
+    pub fn take(&mut self, n: usize) -> Vec<f64> {
+        self.wait();
+        match self.ready.iter().position(|v| v.len() == n) {
+            Some(k) => self.ready.swap_remove(k),
+            None => zeroed_now(n),
+        }
+    }
+
+    /// Vectors made ahead and not taken (after waiting for them).
+    pub fn left(&mut self) -> usize {
+        self.wait();
+        self.ready.len()
+    }
+
+    fn wait(&mut self) {
+        if let Some(h) = self.pending.take() {
+            // A thread that panicked made nothing usable: its vectors are made on demand.
+            if let Ok(made) = h.join() {
+                self.ready.extend(made);
+            }
+        }
+    }
+}
+
+impl Drop for ZeroedAhead {
+    /// Joins the thread: its vectors are not left being made after the caller is done.
+    fn drop(&mut self) {
+        self.wait();
+    }
+}
+
 /// A `Vec` of `n` copies of `value`, or `Error::TooLarge` when the allocator refuses.
 pub fn try_filled<T: Clone>(n: usize, value: T, what: &str) -> Result<Vec<T>> {
     let mut v = try_with_capacity(n, what)?;
@@ -162,6 +235,24 @@ mod tests {
         assert!(c.iter().all(|z| z.re == 0.0 && z.im == 0.0));
         let e: Vec<f64> = try_zeroed(0, "test").unwrap();
         assert!(e.is_empty());
+    }
+
+    #[test]
+    fn vectors_made_ahead_are_zero_and_taken_by_length_once() {
+        let mut ahead = ZeroedAhead::start(vec![5, 3, 5]);
+        let (a, b, c, d) = (ahead.take(5), ahead.take(3), ahead.take(5), ahead.take(5));
+        for (v, n) in [(&a, 5), (&b, 3), (&c, 5), (&d, 5)] {
+            assert_eq!(v.len(), n);
+            assert!(v.iter().all(|&x| x == 0.0));
+        }
+        // The fourth was made on demand; none is left.
+        assert_eq!(ahead.left(), 0);
+        let mut some = ZeroedAhead::start(vec![7, 2]);
+        assert_eq!(some.take(2).len(), 2);
+        assert_eq!(some.left(), 1);
+        let mut none = ZeroedAhead::start(vec![0]);
+        assert_eq!(none.left(), 0);
+        assert_eq!(none.take(4), vec![0.0; 4]);
     }
 
     #[test]

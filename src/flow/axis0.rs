@@ -228,16 +228,18 @@ pub(super) fn solve_axis0(
                 });
             }
         }
-        let mg = Multigrid::new(fine);
-        levels = mg.n_levels();
-        // The reservoirs' vectors on the unknowns; the cell-sized ones are not read again.
-        // `rhs` is 0 off the inlet row and `b_out` off the outlet row (above).
-        let (b_in, b_o) = (
-            mg.gather_from(&rhs, 0..nx),
-            mg.gather_from(&b_out, (ny - 1) * nx..n),
-        );
+        // `rhs` is 0 off the inlet row and `b_out` off the outlet row (above): only those
+        // rows are kept through the setup, not two cell-sized vectors.
+        let (in_row, out_row) = (rhs[..nx].to_vec(), b_out[(ny - 1) * nx..].to_vec());
         (rhs, b_out) = (Vec::new(), Vec::new());
-        let (x, psi, residual, it) = solve_multigrid(&mg, b_in, b_o, opts, max_iter)??;
+        let (mg, ahead) = Multigrid::new_ahead(fine, paths::multigrid_vectors);
+        levels = mg.n_levels();
+        // The reservoirs' vectors on the unknowns.
+        let (b_in, b_o) = (
+            mg.gather_row(&in_row, 0),
+            mg.row_entries(&out_row, (ny - 1) * nx),
+        );
+        let (x, psi, residual, it) = solve_multigrid(&mg, b_in, b_o, opts, max_iter, ahead)??;
         iterations = it;
         (mg.into_fine(), x, psi, residual, "multigrid")
     };

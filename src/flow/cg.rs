@@ -6,7 +6,7 @@ use std::time::Instant;
 use rayon::prelude::*;
 
 use super::assemble::two_sum;
-use crate::alloc::zeroed_now;
+use crate::alloc::ZeroedAhead;
 use crate::error::{Error, Result};
 
 /// Whether `LEAKPATH_FLOW_PROFILE` is set: stage timings of the flow solvers (the factor's
@@ -62,7 +62,8 @@ pub struct Outcome {
 
 /// The vectors of [`refined`], allocated once for a whole solve (like [`Inner`]'s):
 /// allocated afresh for every step, a 10-million-unknown grid faulted in and zeroed some
-/// 0.5 GB each time. Faulted in when allocated ([`zeroed_now`]), not inside the solve.
+/// 0.5 GB each time. Faulted in when allocated ([`crate::alloc::zeroed_now`], or made ahead), not inside
+/// the solve.
 pub struct Work {
     /// The residual (the inner solve's right-hand side) and the correction.
     r: Vec<f64>,
@@ -72,9 +73,14 @@ pub struct Work {
 impl Work {
     /// The vectors for systems of `n` unknowns.
     pub fn new(n: usize) -> Self {
+        Self::from(&mut ZeroedAhead::none(), n)
+    }
+
+    /// [`Work::new`] with the vectors taken from `ahead`.
+    pub fn from(ahead: &mut ZeroedAhead, n: usize) -> Self {
         Work {
-            r: zeroed_now(n),
-            d: zeroed_now(n),
+            r: ahead.take(n),
+            d: ahead.take(n),
         }
     }
 }
@@ -90,10 +96,15 @@ pub struct Inner {
 impl Inner {
     /// The vectors for systems of `n` unknowns.
     pub fn new(n: usize) -> Self {
+        Self::from(&mut ZeroedAhead::none(), n)
+    }
+
+    /// [`Inner::new`] with the vectors taken from `ahead`.
+    pub fn from(ahead: &mut ZeroedAhead, n: usize) -> Self {
         Inner {
-            z: zeroed_now(n),
-            p: zeroed_now(n),
-            q: zeroed_now(n),
+            z: ahead.take(n),
+            p: ahead.take(n),
+            q: ahead.take(n),
         }
     }
 }

@@ -4,7 +4,7 @@
 
 use rayon::prelude::*;
 
-use crate::alloc::zeroed_now;
+use crate::alloc::{zeroed_now, ZeroedAhead};
 
 use super::*;
 
@@ -277,15 +277,15 @@ type MultigridOk = (Vec<f64>, Vec<f64>, f64, usize);
 pub(super) fn solve_multigrid(
     mg: &Multigrid,
     b_in: Vec<f64>,
-    b_out: Vec<f64>,
+    b_out: Vec<(u32, f64)>,
     opts: &Options<'_>,
     max_iter: usize,
+    mut ahead: ZeroedAhead,
 ) -> Result<std::result::Result<MultigridOk, Error>> {
     // Everything runs on the unknowns (the spanning cells), not the grid's cells.
     let qtol = opts.tol;
     let n = b_in.len();
-    let out_rows = Sparse::of(&b_out);
-    drop(b_out);
+    let out_rows = Sparse(b_out);
     // The rate's first-order error at most `tol` of it, and the pressure change a Jacobi step
     // would make, `max |r_k| / d_k`, at most `tol` (a dead end behind a narrow face has a
     // small residual for a large pressure error).
@@ -308,14 +308,20 @@ pub(super) fn solve_multigrid(
             rate.max(jacobi / qtol)
         }
     }
-    let mut work = cg::Work::new(n);
-    let mut correction = Correction::new(mg, opts.should_stop);
+    let mut work = cg::Work::from(&mut ahead, n);
+    let mut correction = Correction::new(mg, opts.should_stop, &mut ahead);
     let mut correct = |r: &mut [f64], r_norm: f64, d: &mut [f64], max_iter: usize| {
         correction.correct(r, r_norm, d, max_iter)
     };
-    let mut x = zeroed_now(n);
+    let mut x = ahead.take(n);
     // φ carried as two doubles: `1 − φ` then keeps its digits where φ is near 1.
-    let mut lo = zeroed_now(n);
+    let mut lo = ahead.take(n);
+    debug_assert_eq!(
+        ahead.left(),
+        0,
+        "every vector made ahead is one of the solve's"
+    );
+    drop(ahead);
     let exact = |x: &[&[f64]], b: &[f64], r: &mut [f64]| mg.residual_exact(x, b, r);
     let a = cg::refined(
         &exact,
@@ -380,6 +386,14 @@ pub(super) fn solve_multigrid(
     Ok(Ok((x, psi, total.residual, total.iterations)))
 }
 
+/// The lengths of the vectors [`solve_multigrid`] takes for `n` unknowns and `m` on `S`
+/// (for [`Multigrid::new_ahead`]): φ and its low part and the refinement's residual and
+/// correction on the unknowns, CG's three and the reduced right-hand side and solution
+/// on `S`.
+pub(super) fn multigrid_vectors(n: usize, m: usize) -> Vec<usize> {
+    [[n; 4].as_slice(), &[m; 5]].concat()
+}
+
 /// The refinement's inner solve on the multigrid: `A δ = r` reduced to the Schur complement
 /// `S` of the red unknowns (`S δ_B = s`, [`Multigrid::reduce`]), solved there by CG
 /// preconditioned with one multigrid cycle on `S`, with `S` applied in double precision from the
@@ -397,15 +411,19 @@ struct Correction<'a> {
 }
 
 impl<'a> Correction<'a> {
-    fn new(mg: &'a Multigrid, should_stop: Option<&'a (dyn Fn() -> bool + Sync)>) -> Self {
+    fn new(
+        mg: &'a Multigrid,
+        should_stop: Option<&'a (dyn Fn() -> bool + Sync)>,
+        ahead: &mut ZeroedAhead,
+    ) -> Self {
         let m = mg.reduced_len().unwrap_or(mg.n_unknowns());
         let own = if mg.reduced_len().is_some() { m } else { 0 };
         Correction {
             mg,
             should_stop,
-            inner: cg::Inner::new(m),
-            s: zeroed_now(own),
-            xs: zeroed_now(own),
+            inner: cg::Inner::from(ahead, m),
+            s: ahead.take(own),
+            xs: ahead.take(own),
         }
     }
 
@@ -456,7 +474,8 @@ impl<'a> Correction<'a> {
     }
 }
 
-/// The non-zero entries of a reservoir's vector (its row's cells only), in index order.
+/// The non-zero entries `(unknown, value)` of a reservoir's vector (its row's cells only),
+/// in index order.
 struct Sparse(Vec<(u32, f64)>);
 
 impl Sparse {

@@ -119,7 +119,7 @@ use rayon::prelude::*;
 
 use super::assemble::Stencil;
 use super::cg::{profiling, secs, CHUNK};
-use crate::alloc::zeroed_now;
+use crate::alloc::{zeroed_now, ZeroedAhead};
 use coarsen::{split, strong, strongest};
 #[cfg(test)]
 use coarsen::{split_in_blocks, split_with, SPLIT_BLOCK};
@@ -617,6 +617,18 @@ impl Multigrid {
     /// level is built from the stencil's rows directly; each level's reservoir part is
     /// freed once the level below it is built.
     pub fn new(fine: Stencil) -> Self {
+        Self::new_ahead(fine, |_, _| Vec::new()).0
+    }
+
+    /// [`Multigrid::new`], with the solve's vectors of lengths `lens(unknowns, unknowns of
+    /// S)` made ahead ([`ZeroedAhead`]) while the level below `S` is split: that splitting's
+    /// first pass is sequential and leaves a core idle. Not earlier: the setup's peak, the
+    /// Galerkin product from `S`, would then carry them. Nothing is made ahead without `S`
+    /// or a level below it to split.
+    pub fn new_ahead(
+        fine: Stencil,
+        lens: impl FnOnce(usize, usize) -> Vec<usize>,
+    ) -> (Self, ZeroedAhead) {
         let t_setup = Instant::now();
         let (cells, index) = unknowns(&fine);
         let top = Fine {
@@ -655,10 +667,17 @@ impl Multigrid {
             // The finest level is the coarsest: factored from the stencil's rows (exact).
             levels.push(Graph::sized(n0));
         }
+        let mut lens = Some(lens);
+        let mut ahead = ZeroedAhead::none();
         loop {
             let g = levels.last().expect("non-empty");
             if g.n <= COARSEST || levels.len() >= MAX_LEVELS {
                 break;
+            }
+            if levels.len() == 2 && reduction.is_some() {
+                if let Some(lens) = lens.take() {
+                    ahead = ZeroedAhead::start(lens(n0, levels[0].n));
+                }
             }
             let Some((ip, c)) = coarsen(g) else { break };
             let done = levels.last_mut().expect("non-empty");
@@ -699,7 +718,7 @@ impl Multigrid {
                 levels.len()
             );
         }
-        Multigrid {
+        let mg = Multigrid {
             fine,
             cells,
             index,
@@ -709,7 +728,8 @@ impl Multigrid {
             interps,
             bufs: Mutex::new(bufs),
             coarse,
-        }
+        };
+        (mg, ahead)
     }
 
     /// The finest operator.
@@ -792,17 +812,24 @@ impl Multigrid {
             .collect()
     }
 
-    /// [`Multigrid::gather`] of a cell vector that is 0 outside the cells `cells` (a
-    /// reservoir's row): only those are read.
-    pub fn gather_from(&self, v: &[f64], cells: std::ops::Range<usize>) -> Vec<f64> {
+    /// [`Multigrid::gather`] of a cell vector that is 0 outside the cells
+    /// `first..first + row.len()` (a reservoir's row), given by those cells' values `row`.
+    pub fn gather_row(&self, row: &[f64], first: usize) -> Vec<f64> {
         let mut out = zeroed_now(self.cells.len());
-        for k in cells {
-            let i = self.index[k];
-            if i != NONE {
-                out[i as usize] = v[k];
-            }
+        for (i, v) in self.row_entries(row, first) {
+            out[i as usize] = v;
         }
         out
+    }
+
+    /// The non-zero entries `(unknown, value)` of [`Multigrid::gather_row`], in the
+    /// unknowns' order.
+    pub fn row_entries(&self, row: &[f64], first: usize) -> Vec<(u32, f64)> {
+        row.iter()
+            .enumerate()
+            .map(|(t, &v)| (self.index[first + t], v))
+            .filter(|&(i, v)| i != NONE && v != 0.0)
+            .collect()
     }
 
     /// The cell vector with `x` (one entry per unknown) on the unknowns' cells, 0 elsewhere.
