@@ -30,6 +30,30 @@ pub(super) fn auto_skips_factor(n_unknowns: usize, room: Option<u64>) -> bool {
         || room.is_some_and(|r| 16 * factor_entries_lower_bound(n_unknowns) > r)
 }
 
+/// φ or ψ read by grid cell: stored by cell (the factored paths), or by unknown with each
+/// cell's unknown (the multigrid's answer, not scattered to a cell-sized vector first).
+struct ByCell<'a> {
+    v: Vec<f64>,
+    /// Each cell's unknown; empty when `v` is by cell.
+    index: &'a [u32],
+}
+
+impl<'a> ByCell<'a> {
+    fn new(v: Vec<f64>, index: &'a [u32]) -> Self {
+        ByCell { v, index }
+    }
+
+    /// The value at cell `k`, which has an unknown when `v` is by unknown.
+    #[inline(always)]
+    fn at(&self, k: usize) -> f64 {
+        if self.index.is_empty() {
+            self.v[k]
+        } else {
+            self.v[self.index[k] as usize]
+        }
+    }
+}
+
 /// `g`: the open gap (0 on closed cells), row-major `ny × nx`, taken over as the cells'
 /// conductances' buffer.
 pub(super) fn solve_axis0(
@@ -211,10 +235,12 @@ pub(super) fn solve_axis0(
             }
         }
     };
-    let (st, x, psi, residual, solver) = if n_unknowns == 0 {
-        (fine, vec![0.0; n], vec![0.0; n], 0.0, "none")
+    // `index`: each cell's unknown when `x` and `psi` are by unknown (the multigrid's), else
+    // empty (by cell).
+    let (st, x, psi, index, residual, solver) = if n_unknowns == 0 {
+        (fine, vec![0.0; n], vec![0.0; n], Vec::new(), 0.0, "none")
     } else if let Some((x, psi, residual)) = direct_answer {
-        (fine, x, psi, residual, "cholesky")
+        (fine, x, psi, Vec::new(), residual, "cholesky")
     } else {
         let need = multigrid_estimate(n, n_unknowns);
         if let Some(limit) = opts.memory_limit {
@@ -241,8 +267,10 @@ pub(super) fn solve_axis0(
         );
         let (x, psi, residual, it) = solve_multigrid(&mg, b_in, b_o, opts, max_iter, ahead)??;
         iterations = it;
-        (mg.into_fine(), x, psi, residual, "multigrid")
+        let (fine, index) = mg.into_fine_and_index();
+        (fine, x, psi, index, residual, "multigrid")
     };
+    let (x, psi) = (ByCell::new(x, &index), ByCell::new(psi, &index));
     drop((rhs, b_out));
     let t_post = std::time::Instant::now();
     let st = &st;
@@ -250,7 +278,7 @@ pub(super) fn solve_axis0(
     let phi: Vec<f64> = (0..n)
         .into_par_iter()
         .map(|k| match class[k] {
-            3 => x[k],
+            3 => x.at(k),
             1 => 1.0,
             2 => 0.0,
             _ => f64::NAN,
@@ -266,20 +294,28 @@ pub(super) fn solve_axis0(
     let split = !xlo.is_empty();
     let face = |cf: f64, k: usize, l: usize| -> f64 {
         if cf <= 0.0 {
-            0.0
-        } else if x[k] + x[l] <= 1.0 {
+            return 0.0;
+        }
+        let (xk, xl) = (x.at(k), x.at(l));
+        if xk + xl <= 1.0 {
             if split {
-                cf * ((x[k] - x[l]) + (xlo[k] - xlo[l]))
+                cf * ((xk - xl) + (xlo[k] - xlo[l]))
             } else {
-                cf * (x[k] - x[l])
+                cf * (xk - xl)
             }
         } else if split {
-            cf * ((psi[l] - psi[k]) + (psilo[l] - psilo[k]))
+            cf * ((psi.at(l) - psi.at(k)) + (psilo[l] - psilo[k]))
         } else {
-            cf * (psi[l] - psi[k])
+            cf * (psi.at(l) - psi.at(k))
         }
     };
-    let at = |v: &[f64], low: &[f64], k: usize| if split { v[k] + low[k] } else { v[k] };
+    let at = |v: &ByCell, low: &[f64], k: usize| {
+        if split {
+            v.at(k) + low[k]
+        } else {
+            v.at(k)
+        }
+    };
     // Fluxes along: (ny + 1) × nx.
     let mut fa = vec![0.0; (ny + 1) * nx];
     fa.par_chunks_mut(nx).enumerate().for_each(|(i, row)| {
@@ -317,8 +353,8 @@ pub(super) fn solve_axis0(
             row[nx] = w;
         }
     });
-    drop(x);
-    drop(psi);
+    drop((x, psi));
+    drop(index);
     drop(lo);
     let q_in: f64 = fa[..nx].iter().sum();
     let q_out: f64 = fa[ny * nx..].iter().sum();

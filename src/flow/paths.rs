@@ -273,6 +273,8 @@ pub(super) fn rate_error(x: &[f64], r: &[f64]) -> f64 {
 /// `b_in`, `b_out`: the reservoirs' vectors on the unknowns ([`Multigrid::gather`]); `φ` and
 /// `ψ` come back on the grid's cells. Each is held dense only while it is a right-hand side
 /// (as the other solve's rate weight it has only the inlet or outlet row's entries).
+/// φ and ψ on the unknowns (not scattered to the grid: [`super::axis0`] reads them through
+/// the unknowns' index), the residual and the iterations.
 type MultigridOk = (Vec<f64>, Vec<f64>, f64, usize);
 pub(super) fn solve_multigrid(
     mg: &Multigrid,
@@ -381,8 +383,6 @@ pub(super) fn solve_multigrid(
     }
     drop(work);
     drop(correction);
-    let x = mg.scatter(&x);
-    let psi = mg.scatter(&psi);
     Ok(Ok((x, psi, total.residual, total.iterations)))
 }
 

@@ -780,9 +780,10 @@ impl Multigrid {
         (fine + below) / fine
     }
 
-    /// The finest operator, the hierarchy dropped.
-    pub fn into_fine(self) -> Stencil {
-        self.fine
+    /// The finest operator and each cell's unknown (`u32::MAX` for none), the hierarchy
+    /// dropped.
+    pub fn into_fine_and_index(self) -> (Stencil, Vec<u32>) {
+        (self.fine, self.index)
     }
 
     /// Number of levels, the finest included.
