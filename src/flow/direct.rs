@@ -1,5 +1,6 @@
 //! Sparse Cholesky solve of the Reynolds system on the cells with unknowns (faer,
-//! supernodal, one thread for the numbers so the bits do not depend on the thread count).
+//! supernodal; each factor's arithmetic on one thread, so the bits do not depend on the
+//! thread count).
 //!
 //! The gaps of a contact close continuously at the contact edges, so `g³` spans fifteen
 //! orders of magnitude and the flow near the percolation threshold passes through necks whose
@@ -11,14 +12,22 @@
 //! The fill-reducing order is [`super::order::ordering`]: a nested dissection of the grid on
 //! large or mostly open grids, approximate minimum degree on pieces otherwise.
 //!
+//! # Two halves
+//!
+//! When the nested dissection has a top cut and there are at least
+//! [`halves::MIN_UNKNOWNS`] unknowns, the two sides of the cut are factored at once, one per
+//! thread, and the cut's Schur complement densely after them ([`super::halves`]); otherwise
+//! one faer factor of all unknowns.
+//!
 //! # Solves
 //!
-//! The flow's two right-hand sides (and their refinement) are solved by
-//! [`supernodal_solve`]: plain loops over each supernode's dense block instead of faer's
-//! general solve, which dispatches dense kernels and a temporary per supernode (the
-//! supernodes here have about five columns); 2.2× faster on the 513² contact gap of the
-//! benchmarks (docs/flow.md). The two columns are solved at once on two threads, each
-//! with the arithmetic it has alone (docs/flow.md).
+//! The flow's two right-hand sides (and their refinement) are solved by plain loops over
+//! each supernode's dense block ([`super::substitution`]) instead of faer's general solve,
+//! which dispatches dense kernels and a temporary per supernode (the supernodes here have
+//! about five columns); 2.2× faster on the 513² contact gap of the benchmarks
+//! (docs/flow.md). With one factor the two columns are solved at once on two threads, each
+//! with the arithmetic it has alone; in halves each side's thread solves both columns in
+//! one pass over its factor (docs/flow.md).
 //!
 //! # Memory
 //!
@@ -28,8 +37,7 @@
 
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::sparse::linalg::cholesky::{
-    factorize_symbolic_cholesky, supernodal::SymbolicSupernodalCholesky, LltRef, SymbolicCholesky,
-    SymbolicCholeskyRaw, SymmetricOrdering,
+    factorize_symbolic_cholesky, LltRef, SymbolicCholesky, SymbolicCholeskyRaw, SymmetricOrdering,
 };
 use faer::sparse::{SparseColMat, SymbolicSparseColMat};
 use faer::{Conj, Mat, Par, Side};
@@ -37,6 +45,9 @@ use std::sync::Arc;
 
 use super::assemble::Stencil;
 use super::cg;
+use super::halves;
+use super::lower::lower_csc;
+use super::substitution::supernodal_solve;
 use crate::error::{Error, Result};
 
 /// Iterative-refinement steps at most per right-hand side.
@@ -64,7 +75,15 @@ pub struct Analysis {
     periodic: bool,
     /// Grid cell of each unknown (cell order).
     cells: Vec<usize>,
-    symbolic: SymbolicCholesky<usize>,
+    structure: Structure,
+}
+
+/// The factor's structure: one supernodal factor of all unknowns, or two halves and their
+/// separator ([`halves`]). One per factor: the variants' sizes do not matter.
+#[allow(clippy::large_enum_variant)]
+enum Structure {
+    Whole(SymbolicCholesky<usize>),
+    Halves(halves::Analysis),
 }
 
 impl Analysis {
@@ -75,7 +94,10 @@ impl Analysis {
 
     /// Entries of a factor on this analysis.
     pub fn entries(&self) -> usize {
-        self.symbolic.len_val()
+        match &self.structure {
+            Structure::Whole(symbolic) => symbolic.len_val(),
+            Structure::Halves(h) => h.entries(),
+        }
     }
 
     /// Whether an operator `st` with `active` unknowns can be factored on this analysis:
@@ -101,13 +123,120 @@ pub struct Factor {
     /// Whether each unknown of the analysis is an active cell of the factored operator
     /// (`None`: all are).
     live: Option<Vec<bool>>,
-    values: Vec<f64>,
-    /// Scratch of one solve.
-    solve_buf: MemBuffer,
+    numeric: Numeric,
     /// Two columns in the factor's order, one after the other ([`supernodal_solve`]).
     work: Vec<f64>,
     /// Whether the analysis was a kept one.
     reused: bool,
+}
+
+/// The factor's values, of its analysis's [`Structure`].
+enum Numeric {
+    Whole {
+        values: Vec<f64>,
+        /// Scratch of one solve.
+        solve_buf: MemBuffer,
+    },
+    Halves(halves::Factor),
+}
+
+/// The operator's matrix for a [`Structure`]: the whole lower triangle, or each half's.
+enum Matrices {
+    Whole(SparseColMat<usize, f64>),
+    Halves([SparseColMat<usize, f64>; 2]),
+}
+
+/// The numeric factor of `a` on `symbolic`, and the scratch of its solves.
+fn whole_numeric(
+    symbolic: &SymbolicCholesky<usize>,
+    a: &SparseColMat<usize, f64>,
+    par: Par,
+) -> Result<Numeric> {
+    let scratch = symbolic.factorize_numeric_llt_scratch::<f64>(par, Default::default());
+    // Zeroed pages from the kernel: the factorisation writes every value, so filling
+    // them here too would be a pass over the whole factor for nothing.
+    let mut values: Vec<f64> = crate::alloc::try_zeroed(symbolic.len_val(), "the factor")
+        .map_err(|_| failed("out of memory"))?;
+    {
+        let mut buf = MemBuffer::try_new(scratch).map_err(|_| failed("out of memory"))?;
+        symbolic
+            .factorize_numeric_llt::<f64>(
+                &mut values,
+                a.as_ref(),
+                Side::Lower,
+                Default::default(),
+                par,
+                MemStack::new(&mut buf),
+                Default::default(),
+            )
+            .map_err(|e| failed(format!("{e:?}")))?;
+    }
+    let solve_buf = MemBuffer::try_new(symbolic.solve_in_place_scratch::<f64>(2, par))
+        .map_err(|_| failed("out of memory"))?;
+    Ok(Numeric::Whole { values, solve_buf })
+}
+
+/// `LEAKPATH_FLOW_PROFILE`'s lines for a factor: its supernodes and flops, and the stages'
+/// times (`t0`: the numeric factor's start).
+#[allow(clippy::too_many_arguments)]
+fn profile(
+    structure: &Structure,
+    m: usize,
+    reused: bool,
+    active: usize,
+    t_matrix: f64,
+    t_order: f64,
+    t_symbolic: f64,
+    t0: std::time::Instant,
+) {
+    let t_numeric = cg::secs(t0);
+    let supernodal = |symbolic: &SymbolicCholesky<usize>| {
+        if let SymbolicCholeskyRaw::Supernodal(sn) = symbolic.raw() {
+            let (b, e, rp) = (
+                sn.supernode_begin(),
+                sn.supernode_end(),
+                sn.col_ptr_for_row_idx(),
+            );
+            let mut flops = 0f64;
+            let mut big = 0usize;
+            for s in 0..sn.n_supernodes() {
+                let nc = e[s] - b[s];
+                big = big.max(nc);
+                let nr = nc + rp[s + 1] - rp[s];
+                for c in 0..nc {
+                    let k = (nr - c) as f64;
+                    flops += k * k;
+                }
+            }
+            eprintln!(
+                "factor: {} supernodes, largest {big} columns, {flops:.3e} flops",
+                sn.n_supernodes()
+            );
+        }
+    };
+    let entries = match structure {
+        Structure::Whole(symbolic) => {
+            supernodal(symbolic);
+            symbolic.len_val()
+        }
+        Structure::Halves(h) => {
+            eprintln!(
+                "factor: in two halves, separator of {} unknowns (matrices with the symbolic \
+                 analysis)",
+                h.separator()
+            );
+            h.entries()
+        }
+    };
+    eprintln!(
+        "factor: {m} unknowns{}, {entries} entries; matrix {t_matrix:.3} s, order {t_order:.3} s, \
+         symbolic {t_symbolic:.3} s, numeric {t_numeric:.3} s",
+        if reused {
+            format!(" (kept analysis, {active} active)")
+        } else {
+            String::new()
+        },
+    );
 }
 
 /// Bytes of the values of a factor with `entries` entries, its numeric scratch `scratch`
@@ -168,48 +297,87 @@ impl Factor {
             None => &cells,
         };
         let m = on.len();
-        let (col_ptr, row_idx, vals) = lower_csc(st, &index, on);
-        let pattern = SymbolicSparseColMat::new_checked(m, m, col_ptr, None, row_idx);
-        let a = SparseColMat::new(pattern, vals);
-        let t_matrix = cg::secs(t0);
-        let (mut t_order, mut t_symbolic) = (0.0, 0.0);
         let reused = reuse.is_some();
-        let analysis = match reuse {
-            Some(an) => an,
+        let t_matrix0 = t0;
+        let (mut t_order, mut t_symbolic, mut t_matrix) = (0.0, 0.0, 0.0);
+        // The whole matrix, unless the analysis is in halves (each builds its own).
+        let whole_matrix = |on: &[usize]| {
+            let (col_ptr, row_idx, vals) = lower_csc(st, on, |l| index[l]);
+            let pattern = SymbolicSparseColMat::new_checked(m, m, col_ptr, None, row_idx);
+            SparseColMat::new(pattern, vals)
+        };
+        let (analysis, matrices) = match reuse {
+            Some(an) => {
+                let matrices = match &an.structure {
+                    Structure::Whole(_) => Matrices::Whole(whole_matrix(&an.cells)),
+                    Structure::Halves(h) => Matrices::Halves(h.matrices(st, &index, &an.cells)),
+                };
+                t_matrix = cg::secs(t_matrix0);
+                (an, matrices)
+            }
             None => {
                 let t0 = std::time::Instant::now();
-                let fwd = super::order::ordering(st, &index, m);
+                let (fwd, cut) = super::order::ordering(st, &index, m);
                 t_order = cg::secs(t0);
+                let halved = cut.filter(|&(na, nb)| {
+                    m >= halves::MIN_UNKNOWNS
+                        && na > 0
+                        && nb > 0
+                        && m - na - nb <= halves::MAX_SEPARATOR
+                });
                 let t0 = std::time::Instant::now();
-                let mut inv = vec![0usize; m];
-                for (new, &old) in fwd.iter().enumerate() {
-                    inv[old] = new;
+                let (structure, matrices) = match halved {
+                    Some(cut) => {
+                        let (h, mats) = halves::Analysis::new(st, &index, &cells, &fwd, cut)?;
+                        (Structure::Halves(h), Matrices::Halves(mats))
+                    }
+                    None => {
+                        let a = whole_matrix(&cells);
+                        t_matrix = cg::secs(t0);
+                        let t0 = std::time::Instant::now();
+                        let mut inv = vec![0usize; m];
+                        for (new, &old) in fwd.iter().enumerate() {
+                            inv[old] = new;
+                        }
+                        let perm = faer::perm::PermRef::new_checked(&fwd, &inv, m);
+                        let symbolic = factorize_symbolic_cholesky(
+                            a.symbolic(),
+                            Side::Lower,
+                            SymmetricOrdering::Custom(perm),
+                            Default::default(),
+                        )
+                        .map_err(failed)?;
+                        t_symbolic = cg::secs(t0);
+                        (Structure::Whole(symbolic), Matrices::Whole(a))
+                    }
+                };
+                if halved.is_some() {
+                    t_symbolic = cg::secs(t0);
                 }
-                let perm = faer::perm::PermRef::new_checked(&fwd, &inv, m);
-                let symbolic = factorize_symbolic_cholesky(
-                    a.symbolic(),
-                    Side::Lower,
-                    SymmetricOrdering::Custom(perm),
-                    Default::default(),
-                )
-                .map_err(failed)?;
-                t_symbolic = cg::secs(t0);
-                Arc::new(Analysis {
+                let an = Arc::new(Analysis {
                     ny: st.ny,
                     nx: st.nx,
                     periodic: st.periodic,
                     cells,
-                    symbolic,
-                })
+                    structure,
+                });
+                (an, matrices)
             }
         };
         drop(index);
         let live = reused.then(|| analysis.cells.iter().map(|&k| st.active[k]).collect());
-        let symbolic = &analysis.symbolic;
         let t0 = std::time::Instant::now();
         let par = Par::Seq;
-        let scratch = symbolic.factorize_numeric_llt_scratch::<f64>(par, Default::default());
-        let need = factor_bytes(symbolic.len_val(), scratch.size_bytes());
+        let (entries, scratch_bytes) = match &analysis.structure {
+            Structure::Whole(symbolic) => (
+                symbolic.len_val(),
+                symbolic
+                    .factorize_numeric_llt_scratch::<f64>(par, Default::default())
+                    .size_bytes() as u64,
+            ),
+            Structure::Halves(h) => (h.entries(), h.scratch_bytes()),
+        };
+        let need = factor_bytes(entries, scratch_bytes as usize);
         if let Some(limit) = memory_limit {
             if need > limit {
                 return Err(Error::TooLarge {
@@ -224,67 +392,30 @@ impl Factor {
             // scratch does not fit.
             crate::dense_scratch::ensure(par)?;
         }
-        // Zeroed pages from the kernel: the factorisation writes every value, so filling
-        // them here too would be a pass over the whole factor for nothing.
-        let mut values: Vec<f64> = crate::alloc::try_zeroed(symbolic.len_val(), "the factor")
-            .map_err(|_| failed("out of memory"))?;
-        {
-            let mut buf = MemBuffer::try_new(scratch).map_err(|_| failed("out of memory"))?;
-            symbolic
-                .factorize_numeric_llt::<f64>(
-                    &mut values,
-                    a.as_ref(),
-                    Side::Lower,
-                    Default::default(),
-                    par,
-                    MemStack::new(&mut buf),
-                    Default::default(),
-                )
-                .map_err(|e| failed(format!("{e:?}")))?;
-        }
-        let solve_buf = MemBuffer::try_new(symbolic.solve_in_place_scratch::<f64>(2, par))
-            .map_err(|_| failed("out of memory"))?;
-        if cg::profiling() {
-            if let SymbolicCholeskyRaw::Supernodal(sn) = symbolic.raw() {
-                let (b, e, rp) = (
-                    sn.supernode_begin(),
-                    sn.supernode_end(),
-                    sn.col_ptr_for_row_idx(),
-                );
-                let mut flops = 0f64;
-                let mut big = 0usize;
-                for s in 0..sn.n_supernodes() {
-                    let nc = e[s] - b[s];
-                    big = big.max(nc);
-                    let nr = nc + rp[s + 1] - rp[s];
-                    for c in 0..nc {
-                        let k = (nr - c) as f64;
-                        flops += k * k;
-                    }
-                }
-                eprintln!(
-                    "factor: {} supernodes, largest {big} columns, {flops:.3e} flops",
-                    sn.n_supernodes()
-                );
+        let numeric = match (&analysis.structure, matrices) {
+            (Structure::Whole(symbolic), Matrices::Whole(a)) => whole_numeric(symbolic, &a, par)?,
+            (Structure::Halves(h), Matrices::Halves(mats)) => {
+                Numeric::Halves(halves::Factor::new(h, mats)?)
             }
-            eprintln!(
-                "factor: {m} unknowns{}, {} entries; matrix {t_matrix:.3} s, order {t_order:.3} s, \
-                 symbolic {t_symbolic:.3} s, numeric {:.3} s",
-                if reused {
-                    format!(" (kept analysis, {active} active)")
-                } else {
-                    String::new()
-                },
-                symbolic.len_val(),
-                cg::secs(t0)
+            _ => unreachable!("matrices built for their structure"),
+        };
+        if cg::profiling() {
+            profile(
+                &analysis.structure,
+                m,
+                reused,
+                active,
+                t_matrix,
+                t_order,
+                t_symbolic,
+                t0,
             );
         }
         Ok(Factor {
             work: vec![0.0; 2 * m],
             analysis,
             live,
-            values,
-            solve_buf,
+            numeric,
             reused,
         })
     }
@@ -301,7 +432,7 @@ impl Factor {
 
     /// Entries of the factor.
     pub fn entries(&self) -> usize {
-        self.values.len()
+        self.analysis.entries()
     }
 
     /// `x = A⁻¹ b` (or `x += A⁻¹ b` with `add`) on the active cells for each pair `(b, x)`
@@ -309,12 +440,47 @@ impl Factor {
     /// active cells only: the other unknowns of a kept analysis are 0).
     fn solve_cells(&mut self, cols: &mut [(&[f64], &mut [f64])], add: bool) {
         let an = &*self.analysis;
-        let (cells, symbolic) = (&an.cells, &an.symbolic);
+        let cells = &an.cells;
         let live = |q: usize| self.live.as_ref().is_none_or(|l| l[q]);
         let m = cells.len();
         if m == 0 {
             return;
         }
+        let set = |x: &mut f64, v: f64| {
+            if add {
+                *x += v;
+            } else {
+                *x = v;
+            }
+        };
+        let symbolic = match (&an.structure, &mut self.numeric) {
+            (Structure::Halves(h), Numeric::Halves(f)) => {
+                // By unknown, solved in place.
+                // Two columns at once (a second of zeros with one).
+                let mut by_unknown: [Vec<f64>; 2] = [0, 1].map(|c| {
+                    (0..m)
+                        .map(|q| match cols.get(c) {
+                            Some(col) if live(q) => col.0[cells[q]],
+                            _ => 0.0,
+                        })
+                        .collect()
+                });
+                f.solve(h, &mut by_unknown);
+                for (c, x) in by_unknown.iter().enumerate().take(cols.len()) {
+                    for (q, &v) in x.iter().enumerate() {
+                        if live(q) {
+                            set(&mut cols[c].1[cells[q]], v);
+                        }
+                    }
+                }
+                return;
+            }
+            (Structure::Whole(symbolic), _) => symbolic,
+            _ => unreachable!("a factor of its analysis's structure"),
+        };
+        let Numeric::Whole { values, solve_buf } = &mut self.numeric else {
+            unreachable!("a factor of its analysis's structure")
+        };
         if let (SymbolicCholeskyRaw::Supernodal(sn), 2, Some(perm)) =
             (symbolic.raw(), cols.len(), symbolic.perm())
         {
@@ -329,22 +495,15 @@ impl Factor {
                 w0[p] = if on { cols[0].0[k] } else { 0.0 };
                 w1[p] = if on { cols[1].0[k] } else { 0.0 };
             }
-            let values = &self.values;
+            let values = &*values;
             rayon::join(
                 || supernodal_solve(sn, values, w0),
                 || supernodal_solve(sn, values, w1),
             );
             for (p, &q) in fwd.iter().enumerate() {
-                if !live(q) {
-                    continue;
-                }
-                let k = cells[q];
-                if add {
-                    cols[0].1[k] += w0[p];
-                    cols[1].1[k] += w1[p];
-                } else {
-                    cols[0].1[k] = w0[p];
-                    cols[1].1[k] = w1[p];
+                if live(q) {
+                    set(&mut cols[0].1[cells[q]], w0[p]);
+                    set(&mut cols[1].1[cells[q]], w1[p]);
                 }
             }
             return;
@@ -356,22 +515,12 @@ impl Factor {
                 0.0
             }
         });
-        let llt = LltRef::<'_, usize, f64>::new(symbolic, &self.values);
-        llt.solve_in_place_with_conj(
-            Conj::No,
-            sol.as_mut(),
-            Par::Seq,
-            MemStack::new(&mut self.solve_buf),
-        );
-        for (c, (_, x)) in cols.iter_mut().enumerate() {
-            for (r, &k) in cells.iter().enumerate() {
-                if !live(r) {
-                    continue;
-                }
-                if add {
-                    x[k] += sol[(r, c)];
-                } else {
-                    x[k] = sol[(r, c)];
+        let llt = LltRef::<'_, usize, f64>::new(symbolic, values);
+        llt.solve_in_place_with_conj(Conj::No, sol.as_mut(), Par::Seq, MemStack::new(solve_buf));
+        for c in 0..cols.len() {
+            for r in 0..m {
+                if live(r) {
+                    set(&mut cols[c].1[cells[r]], sol[(r, c)]);
                 }
             }
         }
@@ -425,117 +574,6 @@ impl Factor {
     }
 }
 
-/// `L Lᵀ y = w` in place (positions in the factor's order) with the supernodal factor
-/// `values` of `sn`: each supernode is a dense column-major block, its diagonal block (lower
-/// triangle) on top of the rows of its pattern. Forward by columns (`y_c = w_c / L_cc`,
-/// then `w_r −= L_rc y_c` below), backward by rows of `Lᵀ`
-/// (`y_c = (w_c − Σ_r L_rc y_r) / L_cc`).
-fn supernodal_solve(sn: &SymbolicSupernodalCholesky<usize>, values: &[f64], w: &mut [f64]) {
-    let ns = sn.n_supernodes();
-    let (begin, end) = (sn.supernode_begin(), sn.supernode_end());
-    let (rptr, vptr) = (sn.col_ptr_for_row_idx(), sn.col_ptr_for_val());
-    let rows = sn.row_idx();
-    for s in 0..ns {
-        let (start, ncols) = (begin[s], end[s] - begin[s]);
-        let pattern = &rows[rptr[s]..rptr[s + 1]];
-        let nrows = ncols + pattern.len();
-        let block = &values[vptr[s]..vptr[s + 1]];
-        for c in 0..ncols {
-            let col = &block[c * nrows..(c + 1) * nrows];
-            let i = start + c;
-            let y = w[i] / col[c];
-            w[i] = y;
-            for (wt, &l) in w[i + 1..start + ncols].iter_mut().zip(&col[c + 1..ncols]) {
-                *wt -= l * y;
-            }
-            for (&t, &l) in pattern.iter().zip(&col[ncols..]) {
-                w[t] -= l * y;
-            }
-        }
-    }
-    for s in (0..ns).rev() {
-        let (start, ncols) = (begin[s], end[s] - begin[s]);
-        let pattern = &rows[rptr[s]..rptr[s + 1]];
-        let nrows = ncols + pattern.len();
-        let block = &values[vptr[s]..vptr[s + 1]];
-        for c in (0..ncols).rev() {
-            let col = &block[c * nrows..(c + 1) * nrows];
-            let i = start + c;
-            let mut a = w[i];
-            for (&wt, &l) in w[i + 1..start + ncols].iter().zip(&col[c + 1..ncols]) {
-                a -= l * wt;
-            }
-            for (&t, &l) in pattern.iter().zip(&col[ncols..]) {
-                a -= l * w[t];
-            }
-            w[i] = a / col[c];
-        }
-    }
-}
-
-/// The lower triangle (row ≥ column) of the operator on the unknowns `cells` (`index`:
-/// grid cell → unknown), by columns, rows ascending: each unknown's diagonal, then its
-/// neighbours of larger index along every grid face between two unknowns, with the face's
-/// conductance (0 on a closed face). An unknown on a cell that is not active (a kept
-/// analysis's) has diagonal 1 and no couplings (its faces are closed).
-fn lower_csc(st: &Stencil, index: &[usize], cells: &[usize]) -> (Vec<usize>, Vec<usize>, Vec<f64>) {
-    let m = cells.len();
-    let (ny, nx) = (st.ny, st.nx);
-    let mut col_ptr = Vec::with_capacity(m + 1);
-    let mut row_idx = Vec::with_capacity(3 * m);
-    let mut vals = Vec::with_capacity(3 * m);
-    col_ptr.push(0);
-    for (q, &k) in cells.iter().enumerate() {
-        let (i, j) = (k / nx, k % nx);
-        let base = i * nx;
-        // Every grid face of `k`: (neighbour, conductance).
-        let mut faces: [(usize, f64); 4] = [(usize::MAX, 0.0); 4];
-        let mut nf = 0;
-        let mut face = |l: usize, c: f64| {
-            faces[nf] = (l, c);
-            nf += 1;
-        };
-        if j + 1 < nx {
-            face(k + 1, st.e[k]);
-        } else if st.periodic && nx > 1 {
-            face(base, st.e[k]);
-        }
-        if let Some(wj) = st.west(j) {
-            face(base + wj, st.e[base + wj]);
-        }
-        if i + 1 < ny {
-            face(k + nx, st.s[k]);
-        }
-        if i > 0 {
-            face(k - nx, st.s[k - nx]);
-        }
-        let mut below: [(usize, f64); 4] = [(usize::MAX, 0.0); 4];
-        let mut nb = 0;
-        for &(l, c) in &faces[..nf] {
-            let t = index[l];
-            if t != usize::MAX && t > q {
-                // The two faces of a 2-wide periodic row join the same pair: add them.
-                if let Some(e) = below[..nb].iter_mut().find(|e| e.0 == t) {
-                    e.1 -= c;
-                } else {
-                    below[nb] = (t, -c);
-                    nb += 1;
-                }
-            }
-        }
-        below[..nb].sort_unstable_by_key(|e| e.0);
-        row_idx.push(q);
-        vals.push(if st.active[k] { st.d[k] } else { 1.0 });
-        for &(t, v) in &below[..nb] {
-            row_idx.push(t);
-            // `-0.0 → 0.0`: a closed face stores a plain zero.
-            vals.push(v + 0.0);
-        }
-        col_ptr.push(row_idx.len());
-    }
-    (col_ptr, row_idx, vals)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -559,8 +597,8 @@ mod tests {
             .collect();
         let mut f = Factor::new(&st, None).unwrap();
         assert!(matches!(
-            f.analysis.symbolic.raw(),
-            SymbolicCholeskyRaw::Supernodal(_)
+            &f.analysis.structure,
+            Structure::Whole(symbolic) if matches!(symbolic.raw(), SymbolicCholeskyRaw::Supernodal(_))
         ));
         let mut r = vec![0.0; n];
         let mut rel = |x: &[f64], b: &[f64]| {
@@ -571,12 +609,17 @@ mod tests {
         let general = |f: &mut Factor, b: &[f64]| {
             let m = f.analysis.cells.len();
             let mut sol = Mat::<f64>::from_fn(m, 1, |q, _| b[f.analysis.cells[q]]);
-            let llt = LltRef::<'_, usize, f64>::new(&f.analysis.symbolic, &f.values);
+            let (Structure::Whole(symbolic), Numeric::Whole { values, solve_buf }) =
+                (&f.analysis.structure, &mut f.numeric)
+            else {
+                panic!("a whole factor")
+            };
+            let llt = LltRef::<'_, usize, f64>::new(symbolic, values);
             llt.solve_in_place_with_conj(
                 Conj::No,
                 sol.as_mut(),
                 Par::Seq,
-                MemStack::new(&mut f.solve_buf),
+                MemStack::new(solve_buf),
             );
             let mut x = vec![0.0; n];
             for (q, &k) in f.analysis.cells.iter().enumerate() {

@@ -42,10 +42,13 @@ mod axis0;
 pub mod cg;
 pub mod direct;
 pub mod gth;
+mod halves;
 pub mod kept;
+mod lower;
 pub mod multigrid;
 pub mod order;
 mod paths;
+mod substitution;
 
 use rayon::prelude::*;
 

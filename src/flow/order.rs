@@ -69,13 +69,20 @@ const BLOCK_UPTO_CELLS: usize = 1 << 20;
 /// `usize::MAX` for none) for the factor: the nested dissection ([`nd_order`]) on grids of at
 /// least [`ND_ALWAYS_CELLS`] cells, and of at least [`ND_FROM_CELLS`] cells when at least
 /// [`ND_OPEN_PERCENT`] % of them carry unknowns; the minimum-degree order on pieces otherwise
-/// (module docs).
-pub(super) fn ordering(st: &Stencil, index: &[usize], m: usize) -> Vec<usize> {
+/// (module docs). With the nested dissection, also the sizes `(a, b)` of the two sides of
+/// its top cut: the order is then side `a`, side `b`, and the separator last (the top cut,
+/// and on a wrapped grid the column that opened it), no unknown of one side next to one of
+/// the other (the halves of [`super::halves`]).
+pub(super) fn ordering(
+    st: &Stencil,
+    index: &[usize],
+    m: usize,
+) -> (Vec<usize>, Option<(usize, usize)>) {
     let cells = st.ny * st.nx;
     if cells >= ND_ALWAYS_CELLS || (cells >= ND_FROM_CELLS && 100 * m >= ND_OPEN_PERCENT * cells) {
         nd_order(st, index, m)
     } else {
-        order_pieces(st, index, m, true)
+        (order_pieces(st, index, m, true), None)
     }
 }
 
@@ -101,37 +108,44 @@ const ND_SEARCH_CELLS: usize = 4096;
 const ND_REACH: usize = 8;
 
 /// Geometric nested dissection of the whole grid ([`nd_region`]); a wrapped grid is first
-/// opened by its last column, which comes last.
-pub(super) fn nd_order(st: &Stencil, index: &[usize], m: usize) -> Vec<usize> {
+/// opened by its last column, which comes last. With the sizes of the two sides of the top
+/// cut (none when the grid is not cut).
+pub(super) fn nd_order(
+    st: &Stencil,
+    index: &[usize],
+    m: usize,
+) -> (Vec<usize>, Option<(usize, usize)>) {
     let mut out = Vec::with_capacity(m);
     let (ny, nx) = (st.ny, st.nx);
-    if st.periodic && nx > 2 {
-        nd_region(st, index, (0, ny), (0, nx - 1), &mut out);
+    let top = if st.periodic && nx > 2 {
+        let top = nd_region(st, index, (0, ny), (0, nx - 1), &mut out);
         out.extend(
             (0..ny)
                 .map(|i| index[i * nx + nx - 1])
                 .filter(|&q| q != usize::MAX),
         );
+        top
     } else {
-        nd_region(st, index, (0, ny), (0, nx), &mut out);
-    }
-    out
+        nd_region(st, index, (0, ny), (0, nx), &mut out)
+    };
+    (out, top)
 }
 
 /// Nested dissection of one rectangle: cut across its longer side by a row or column near
 /// the middle ([`ND_SEARCH_CELLS`]), each side ordered the same way (in parallel when
 /// large; the order does not depend on the thread count), the cut last; a rectangle of at
-/// most [`ND_LEAF`] cells, or narrower than 3 both ways, in row-major order.
+/// most [`ND_LEAF`] cells, or narrower than 3 both ways, in row-major order. Returns the
+/// unknowns of the two sides when it was cut.
 fn nd_region(
     st: &Stencil,
     index: &[usize],
     r: (usize, usize),
     c: (usize, usize),
     out: &mut Vec<usize>,
-) {
+) -> Option<(usize, usize)> {
     let (h, w) = (r.1 - r.0, c.1 - c.0);
     if h == 0 || w == 0 {
-        return;
+        return None;
     }
     let nx = st.nx;
     if h * w <= ND_LEAF || (h < 3 && w < 3) {
@@ -142,7 +156,7 @@ fn nd_region(
                     .filter(|&q| q != usize::MAX),
             );
         }
-        return;
+        return None;
     }
     // The cut at `lo + 1 .. lo + long − 1` with the fewest unknowns within `long / ND_REACH`
     // of the middle, the nearest to the middle on ties.
@@ -177,19 +191,26 @@ fn nd_region(
             (r.0..r.1).map(|i| index[i * nx + mid]).collect(),
         )
     };
-    if h * w >= 1 << 16 {
+    let start = out.len();
+    let na = if h * w >= 1 << 16 {
         let (mut a, mut b) = (Vec::new(), Vec::new());
         rayon::join(
             || nd_region(st, index, ra, ca, &mut a),
             || nd_region(st, index, rb, cb, &mut b),
         );
+        let na = a.len();
         out.extend(a);
         out.extend(b);
+        na
     } else {
         nd_region(st, index, ra, ca, out);
+        let na = out.len() - start;
         nd_region(st, index, rb, cb, out);
-    }
+        na
+    };
+    let nb = out.len() - start - na;
     out.extend(sep.into_iter().filter(|&q| q != usize::MAX));
+    Some((na, nb))
 }
 
 /// [`ordering`] with blocks on the small pieces only (at most [`BLOCK_MAX_CELLS`] cells), for

@@ -1,0 +1,425 @@
+//! The sparse Cholesky factor computed as two halves at once, one per thread.
+//!
+//! The nested-dissection order ([`super::order::ordering`]) eliminates the two
+//! sides `A` and `B` of the grid's top cut first, each on its own, and the cut (the
+//! separator `S`, `k` unknowns) last. With the unknowns ordered `[A, B, S]` the factor is
+//!
+//! ```text
+//! L = | L_AA   0     0    |
+//!     | 0      L_BB  0    |
+//!     | L_SA   L_SB  L_SS |
+//! ```
+//!
+//! and the columns of a side depend only on the rows of that side and of `S`. faer factors
+//! the principal submatrix `M_A = A[A ∪ S, A ∪ S]` (positive definite, as a principal
+//! submatrix of a positive definite matrix), whose columns on `A` are `[L_AA; L_SA]`
+//! exactly, and `M_B` likewise, on the two threads. The separator block `L_A` of `M_A`'s
+//! factor has `L_A L_Aᵀ = A_SS − L_SA L_SAᵀ`, so the separator's Schur complement is
+//! `A_SS − L_SA L_SAᵀ − L_SB L_SBᵀ = L_A L_Aᵀ + L_B L_Bᵀ − A_SS`, factored densely:
+//! `L_SS`. The factorisations of the separator blocks inside `M_A` and `M_B` and the two
+//! products are the price (`k³/3` flops each, `k` ≈ the grid's side): small against the
+//! half of the factor that runs on the second core (docs/flow.md, "The factor in two
+//! halves").
+//!
+//! A solve runs forward on each side's factor up to its separator columns (the sides at
+//! once), the separator's right-hand side gathered from both, the dense `L_SS` both ways,
+//! then backward on each side from the separator's values. Each half's arithmetic is the
+//! same whatever the threads, so the answer does not depend on them.
+
+use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::linalg::cholesky::llt::factor::{cholesky_in_place, cholesky_in_place_scratch};
+use faer::linalg::matmul::triangular::{matmul, BlockStructure};
+use faer::linalg::triangular_solve::{
+    solve_lower_triangular_in_place, solve_upper_triangular_in_place,
+};
+use faer::sparse::linalg::cholesky::{
+    factorize_symbolic_cholesky, supernodal::SymbolicSupernodalCholesky, CholeskySymbolicParams,
+    SymbolicCholesky, SymbolicCholeskyRaw, SymmetricOrdering,
+};
+use faer::sparse::linalg::SupernodalThreshold;
+use faer::sparse::{SparseColMat, SymbolicSparseColMat};
+use faer::{Accum, Mat, Par, Side};
+
+use super::assemble::Stencil;
+use super::lower::lower_csc;
+use super::substitution::{supernodal_backward, supernodal_forward};
+use crate::error::{Error, Result};
+
+/// Grids with at least this many unknowns are factored in halves when their order has a
+/// top cut (fewer: the two threads' start and the separator's dense work cost more than
+/// the half of the factor they take off one core).
+pub const MIN_UNKNOWNS: usize = 1 << 15;
+
+/// Largest separator factored in halves: its dense blocks (four of `k²` values) stay a
+/// small part of the factor's memory.
+pub const MAX_SEPARATOR: usize = 1 << 13;
+
+fn failed(what: impl std::fmt::Display) -> Error {
+    Error::NotConverged {
+        iterations: 0,
+        residual: f64::NAN,
+        what: format!("reynolds-flow sparse Cholesky in halves ({what})"),
+    }
+}
+
+/// One side's principal submatrix `M = A[side ∪ S, side ∪ S]` and its symbolic factor,
+/// the matrix in elimination order (the side's unknowns, then the separator's).
+struct SideAnalysis {
+    /// Unknowns (indices into the analysis's cells) of the side, then of the separator.
+    unknowns: Vec<usize>,
+    /// Unknowns of the side itself (the separator's are the last `k`).
+    own: usize,
+    symbolic: SymbolicCholesky<usize>,
+}
+
+/// The symbolic analysis of a factor in halves.
+pub struct Analysis {
+    sides: [SideAnalysis; 2],
+    /// Unknowns of the separator.
+    k: usize,
+}
+
+/// The numeric factor in halves: each side's supernodal values and the separator's dense
+/// factor `L_SS` (lower triangle).
+pub struct Factor {
+    values: [Vec<f64>; 2],
+    ls: Mat<f64>,
+}
+
+/// A side's matrix: lower triangle by columns in elimination order.
+type Lower = SparseColMat<usize, f64>;
+
+impl Analysis {
+    /// The analysis for unknowns `cells` (grid cell of each) ordered `order` whose first
+    /// `cut.0` and next `cut.1` unknowns are the two sides of the separator that follows:
+    /// the two sides' matrices (for [`Factor::new`]) with it. `index`: grid cell →
+    /// unknown.
+    pub fn new(
+        st: &Stencil,
+        index: &[usize],
+        cells: &[usize],
+        order: &[usize],
+        cut: (usize, usize),
+    ) -> Result<(Self, [Lower; 2])> {
+        let (na, nb) = cut;
+        let sep = &order[na + nb..];
+        let side = |own: &[usize]| -> Result<(SideAnalysis, Lower)> {
+            let unknowns: Vec<usize> = own.iter().chain(sep).copied().collect();
+            let a = side_matrix(st, index, cells, &unknowns);
+            let params = CholeskySymbolicParams {
+                supernodal_flop_ratio_threshold: SupernodalThreshold::FORCE_SUPERNODAL,
+                ..Default::default()
+            };
+            // The identity as a custom order: faer's `Identity` takes the pattern as an upper
+            // triangle whatever the side given, a custom order converts it.
+            let id: Vec<usize> = (0..unknowns.len()).collect();
+            let perm = faer::perm::PermRef::new_checked(&id, &id, id.len());
+            let symbolic = factorize_symbolic_cholesky(
+                a.symbolic(),
+                Side::Lower,
+                SymmetricOrdering::Custom(perm),
+                params,
+            )
+            .map_err(failed)?;
+            Ok((
+                SideAnalysis {
+                    unknowns,
+                    own: own.len(),
+                    symbolic,
+                },
+                a,
+            ))
+        };
+        let (a, b) = rayon::join(|| side(&order[..na]), || side(&order[na..na + nb]));
+        let ((sa, ma), (sb, mb)) = (a?, b?);
+        Ok((
+            Analysis {
+                sides: [sa, sb],
+                k: sep.len(),
+            },
+            [ma, mb],
+        ))
+    }
+
+    /// The two sides' matrices of the operator `st` on this analysis's unknowns.
+    pub fn matrices(&self, st: &Stencil, index: &[usize], cells: &[usize]) -> [Lower; 2] {
+        let (a, b) = rayon::join(
+            || side_matrix(st, index, cells, &self.sides[0].unknowns),
+            || side_matrix(st, index, cells, &self.sides[1].unknowns),
+        );
+        [a, b]
+    }
+
+    /// Entries of the factor: both sides' supernodal values and the dense `L_SS`.
+    pub fn entries(&self) -> usize {
+        self.sides
+            .iter()
+            .map(|s| s.symbolic.len_val())
+            .sum::<usize>()
+            + self.k * self.k
+    }
+
+    /// Bytes of the numeric factorisation beyond the entries: both sides' faer scratch and
+    /// the separator's dense blocks while `L_SS` is formed (two products and `A_SS`).
+    pub fn scratch_bytes(&self) -> u64 {
+        let faer: usize = self
+            .sides
+            .iter()
+            .map(|s| {
+                s.symbolic
+                    .factorize_numeric_llt_scratch::<f64>(Par::Seq, Default::default())
+                    .size_bytes()
+            })
+            .sum();
+        faer as u64 + 3 * 8 * (self.k * self.k) as u64
+    }
+
+    /// Unknowns of the separator.
+    pub fn separator(&self) -> usize {
+        self.k
+    }
+}
+
+/// The lower triangle of `A[unknowns, unknowns]` in the order of `unknowns`.
+fn side_matrix(st: &Stencil, index: &[usize], cells: &[usize], unknowns: &[usize]) -> Lower {
+    let mut local = vec![usize::MAX; cells.len()];
+    for (p, &q) in unknowns.iter().enumerate() {
+        local[q] = p;
+    }
+    let side_cells: Vec<usize> = unknowns.iter().map(|&q| cells[q]).collect();
+    let (col_ptr, row_idx, vals) = lower_csc(st, &side_cells, |l| match index[l] {
+        usize::MAX => usize::MAX,
+        q => local[q],
+    });
+    let m = unknowns.len();
+    let pattern = SymbolicSparseColMat::new_checked(m, m, col_ptr, None, row_idx);
+    SparseColMat::new(pattern, vals)
+}
+
+fn supernodal(s: &SymbolicCholesky<usize>) -> &SymbolicSupernodalCholesky<usize> {
+    match s.raw() {
+        SymbolicCholeskyRaw::Supernodal(sn) => sn,
+        // `Analysis::new` asks faer for the supernodal structure.
+        SymbolicCholeskyRaw::Simplicial(_) => unreachable!("a supernodal analysis"),
+    }
+}
+
+impl Factor {
+    /// Factors the two sides' matrices `m` (of [`Analysis::new`] or
+    /// [`Analysis::matrices`]) at once and the separator's Schur complement after them.
+    pub fn new(an: &Analysis, m: [Lower; 2]) -> Result<Self> {
+        let k = an.k;
+        let [ma, mb] = m;
+        // `A_SS`'s lower triangle, from the first side's matrix (the same block in both).
+        let mut s = Mat::<f64>::zeros(k, k);
+        {
+            let own = an.sides[0].own;
+            let (cp, ri, v) = (ma.symbolic().col_ptr(), ma.symbolic().row_idx(), ma.val());
+            for c in own..own + k {
+                for p in cp[c]..cp[c + 1] {
+                    s[(ri[p] - own, c - own)] = -v[p];
+                }
+            }
+        }
+        let side = |sa: &SideAnalysis, a: Lower| -> Result<(Vec<f64>, Mat<f64>)> {
+            let symbolic = &sa.symbolic;
+            let scratch =
+                symbolic.factorize_numeric_llt_scratch::<f64>(Par::Seq, Default::default());
+            let mut values: Vec<f64> = crate::alloc::try_zeroed(symbolic.len_val(), "the factor")
+                .map_err(|_| failed("out of memory"))?;
+            let mut buf = MemBuffer::try_new(scratch).map_err(|_| failed("out of memory"))?;
+            symbolic
+                .factorize_numeric_llt::<f64>(
+                    &mut values,
+                    a.as_ref(),
+                    Side::Lower,
+                    Default::default(),
+                    Par::Seq,
+                    MemStack::new(&mut buf),
+                    Default::default(),
+                )
+                .map_err(|e| failed(format!("{e:?}")))?;
+            drop((buf, a));
+            // The separator block `L_X` (rows and columns `own..`), then `L_X L_Xᵀ`.
+            let (own, k) = (sa.own, sa.unknowns.len() - sa.own);
+            let mut lx = Mat::<f64>::zeros(k, k);
+            let sn = supernodal(symbolic);
+            let (begin, end) = (sn.supernode_begin(), sn.supernode_end());
+            let (rptr, vptr, rows) = (sn.col_ptr_for_row_idx(), sn.col_ptr_for_val(), sn.row_idx());
+            for t in 0..sn.n_supernodes() {
+                if end[t] <= own {
+                    continue;
+                }
+                let (start, ncols) = (begin[t], end[t] - begin[t]);
+                let pattern = &rows[rptr[t]..rptr[t + 1]];
+                let nrows = ncols + pattern.len();
+                let block = &values[vptr[t]..vptr[t + 1]];
+                for c in 0..ncols {
+                    let j = start + c;
+                    if j < own {
+                        continue;
+                    }
+                    let col = &block[c * nrows..(c + 1) * nrows];
+                    for (r, &l) in col[c..ncols].iter().enumerate() {
+                        lx[(j + r - own, j - own)] = l;
+                    }
+                    for (&i, &l) in pattern.iter().zip(&col[ncols..]) {
+                        lx[(i - own, j - own)] = l;
+                    }
+                }
+            }
+            let mut t = Mat::<f64>::zeros(k, k);
+            matmul(
+                t.as_mut(),
+                BlockStructure::TriangularLower,
+                Accum::Replace,
+                lx.as_ref(),
+                BlockStructure::TriangularLower,
+                lx.transpose(),
+                BlockStructure::TriangularUpper,
+                1.0,
+                Par::Seq,
+            );
+            Ok((values, t))
+        };
+        let (a, b) = rayon::join(|| side(&an.sides[0], ma), || side(&an.sides[1], mb));
+        let ((va, ta), (vb, tb)) = (a?, b?);
+        // `S = L_A L_Aᵀ + L_B L_Bᵀ − A_SS` (lower triangle; `s` holds `−A_SS`).
+        for j in 0..k {
+            for i in j..k {
+                s[(i, j)] += ta[(i, j)] + tb[(i, j)];
+            }
+        }
+        drop((ta, tb));
+        let scratch = cholesky_in_place_scratch::<f64>(k, Par::Seq, Default::default());
+        let mut buf = MemBuffer::try_new(scratch).map_err(|_| failed("out of memory"))?;
+        cholesky_in_place(
+            s.as_mut(),
+            Default::default(),
+            Par::Seq,
+            MemStack::new(&mut buf),
+            Default::default(),
+        )
+        .map_err(|e| failed(format!("the separator's Schur complement: {e:?}")))?;
+        Ok(Factor {
+            values: [va, vb],
+            ls: s,
+        })
+    }
+
+    /// `A x = b` for the two columns of `cols` (by unknown, in the analysis's cells'
+    /// order), overwritten with `x`: on each side both columns at once, interleaved
+    /// (one pass over the side's factor each way).
+    pub fn solve(&self, an: &Analysis, cols: &mut [Vec<f64>; 2]) {
+        let k = an.k;
+        let forward = |sa: &SideAnalysis, values: &[f64], cols: &[Vec<f64>; 2]| -> Vec<f64> {
+            let mut w = vec![0.0; 2 * sa.unknowns.len()];
+            for (p, &q) in sa.unknowns[..sa.own].iter().enumerate() {
+                w[2 * p] = cols[0][q];
+                w[2 * p + 1] = cols[1][q];
+            }
+            supernodal_forward::<2>(supernodal(&sa.symbolic), values, &mut w, sa.own);
+            w
+        };
+        let (mut wa, mut wb) = rayon::join(
+            || forward(&an.sides[0], &self.values[0], cols),
+            || forward(&an.sides[1], &self.values[1], cols),
+        );
+        // The separator's right-hand side: `b_S − L_SA y_A − L_SB y_B`.
+        let sep = &an.sides[0].unknowns[an.sides[0].own..];
+        let (oa, ob) = (an.sides[0].own, an.sides[1].own);
+        let mut u = Mat::<f64>::from_fn(k, 2, |i, c| {
+            cols[c][sep[i]] + wa[2 * (oa + i) + c] + wb[2 * (ob + i) + c]
+        });
+        solve_lower_triangular_in_place(self.ls.as_ref(), u.as_mut(), Par::Seq);
+        solve_upper_triangular_in_place(self.ls.transpose(), u.as_mut(), Par::Seq);
+        for c in 0..2 {
+            for i in 0..k {
+                wa[2 * (oa + i) + c] = u[(i, c)];
+                wb[2 * (ob + i) + c] = u[(i, c)];
+            }
+        }
+        let backward = |sa: &SideAnalysis, values: &[f64], w: &mut [f64]| {
+            supernodal_backward::<2>(supernodal(&sa.symbolic), values, w, sa.own);
+        };
+        rayon::join(
+            || backward(&an.sides[0], &self.values[0], &mut wa),
+            || backward(&an.sides[1], &self.values[1], &mut wb),
+        );
+        for (c, x) in cols.iter_mut().enumerate() {
+            for (sa, w) in an.sides.iter().zip([&wa, &wb]) {
+                for (p, &q) in sa.unknowns[..sa.own].iter().enumerate() {
+                    x[q] = w[2 * p + c];
+                }
+            }
+            for (i, &q) in sep.iter().enumerate() {
+                x[q] = u[(i, c)];
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::flow::assemble::fine_stencil;
+    use crate::flow::cg;
+    use crate::flow::direct;
+
+    /// The factor in halves against the whole factor on the same grids (wrapped and not,
+    /// conductances over six decades and a third of the cells at 1e-12, a condition number
+    /// beyond 1e12): the relative residuals `‖b − A x‖/‖b‖` (summed exactly) within 10× the
+    /// whole factor's.
+    #[test]
+    fn halves_solve_as_the_whole_factor() {
+        for periodic in [true, false] {
+            let (ny, nx) = (260, 230);
+            let n = ny * nx;
+            let u = crate::flow::tests::lcg(5, n);
+            let c: Vec<f64> = u
+                .iter()
+                .map(|&v| if v < 0.3 { 1e-12 } else { 10f64.powf(-6.0 * v) })
+                .collect();
+            let (st, b1) = fine_stencil(&c, ny, nx, periodic);
+            let mut index = vec![usize::MAX; n];
+            let mut cells = Vec::new();
+            for (k, slot) in index.iter_mut().enumerate() {
+                if st.active[k] {
+                    *slot = cells.len();
+                    cells.push(k);
+                }
+            }
+            let m = cells.len();
+            let (order, cut) = crate::flow::order::nd_order(&st, &index, m);
+            let cut = cut.expect("a top cut");
+            let (an, mats) = Analysis::new(&st, &index, &cells, &order, cut).unwrap();
+            let f = Factor::new(&an, mats).unwrap();
+            let b2: Vec<f64> = crate::flow::tests::lcg(6, n)
+                .iter()
+                .zip(&st.active)
+                .map(|(&v, &on)| if on { v - 0.5 } else { 0.0 })
+                .collect();
+            let mut cols: [Vec<f64>; 2] = [&b1, &b2].map(|b| cells.iter().map(|&k| b[k]).collect());
+            f.solve(&an, &mut cols);
+            let mut whole = direct::Factor::new(&st, None).unwrap();
+            let (mut w1, mut w2) = (vec![0.0; n], vec![0.0; n]);
+            whole.solve_pair(&b1, &b2, &mut w1, &mut w2);
+            let mut r = vec![0.0; n];
+            let mut rel = |x: &[f64], b: &[f64]| {
+                st.residual_compensated(x, b, &mut r);
+                cg::dot(&r, &r).sqrt() / cg::dot(b, b).sqrt()
+            };
+            for (col, (b, w)) in cols.iter().zip([(&b1, &w1), (&b2, &w2)]) {
+                let mut x = vec![0.0; n];
+                for (q, &k) in cells.iter().enumerate() {
+                    x[k] = col[q];
+                }
+                let (halves, whole) = (rel(&x, b), rel(w, b));
+                assert!(
+                    halves < 1e-6 && halves <= 10.0 * whole + 1e-15,
+                    "periodic={periodic}: residual {halves:e} (whole factor {whole:e})"
+                );
+            }
+        }
+    }
+}

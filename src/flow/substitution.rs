@@ -1,0 +1,114 @@
+//! Forward and backward substitution with a supernodal Cholesky factor `L Lᵀ` (faer's
+//! supernodal structure and values), in plain loops over each supernode's dense block:
+//! faer's general solve dispatches dense kernels and a temporary per supernode, and the
+//! supernodes of the flow's factors have about five columns (docs/flow.md).
+
+use faer::sparse::linalg::cholesky::supernodal::SymbolicSupernodalCholesky;
+
+/// `L Lᵀ y = w` in place (positions in the factor's order) with the supernodal factor
+/// `values` of `sn`: each supernode is a dense column-major block, its diagonal block (lower
+/// triangle) on top of the rows of its pattern. Forward by columns (`y_c = w_c / L_cc`,
+/// then `w_r −= L_rc y_c` below), backward by rows of `Lᵀ`
+/// (`y_c = (w_c − Σ_r L_rc y_r) / L_cc`).
+pub(super) fn supernodal_solve(
+    sn: &SymbolicSupernodalCholesky<usize>,
+    values: &[f64],
+    w: &mut [f64],
+) {
+    let n = w.len();
+    supernodal_forward::<1>(sn, values, w, n);
+    supernodal_backward::<1>(sn, values, w, n);
+}
+
+/// The forward half of [`supernodal_solve`] for `K` columns interleaved (`w[K p + c]`, read
+/// from the factor once), on the factor's columns before `stop` (a factor in halves stops
+/// at its separator, [`super::halves`]): their `y`, and their updates `w_r −= L_rc y_c` to
+/// every row below, the separator's included. Each column's arithmetic is that of
+/// `K = 1`.
+pub(super) fn supernodal_forward<const K: usize>(
+    sn: &SymbolicSupernodalCholesky<usize>,
+    values: &[f64],
+    w: &mut [f64],
+    stop: usize,
+) {
+    let ns = sn.n_supernodes();
+    let (begin, end) = (sn.supernode_begin(), sn.supernode_end());
+    let (rptr, vptr) = (sn.col_ptr_for_row_idx(), sn.col_ptr_for_val());
+    let rows = sn.row_idx();
+    for s in 0..ns {
+        let (start, ncols) = (begin[s], end[s] - begin[s]);
+        let pattern = &rows[rptr[s]..rptr[s + 1]];
+        let nrows = ncols + pattern.len();
+        let block = &values[vptr[s]..vptr[s + 1]];
+        for c in 0..ncols {
+            let i = start + c;
+            if i >= stop {
+                return;
+            }
+            let col = &block[c * nrows..(c + 1) * nrows];
+            let mut y = [0.0; K];
+            for (k, yk) in y.iter_mut().enumerate() {
+                *yk = w[K * i + k] / col[c];
+                w[K * i + k] = *yk;
+            }
+            for (wt, &l) in w[K * (i + 1)..K * (start + ncols)]
+                .chunks_exact_mut(K)
+                .zip(&col[c + 1..ncols])
+            {
+                for k in 0..K {
+                    wt[k] -= l * y[k];
+                }
+            }
+            for (&t, &l) in pattern.iter().zip(&col[ncols..]) {
+                for k in 0..K {
+                    w[K * t + k] -= l * y[k];
+                }
+            }
+        }
+    }
+}
+
+/// The backward half of [`supernodal_solve`] for `K` interleaved columns, on the factor's
+/// columns before `stop`, the values of `w` from `stop` on taken as solved (a separator's).
+pub(super) fn supernodal_backward<const K: usize>(
+    sn: &SymbolicSupernodalCholesky<usize>,
+    values: &[f64],
+    w: &mut [f64],
+    stop: usize,
+) {
+    let ns = sn.n_supernodes();
+    let (begin, end) = (sn.supernode_begin(), sn.supernode_end());
+    let (rptr, vptr) = (sn.col_ptr_for_row_idx(), sn.col_ptr_for_val());
+    let rows = sn.row_idx();
+    for s in (0..ns).rev() {
+        let (start, ncols) = (begin[s], end[s] - begin[s]);
+        if start >= stop {
+            continue;
+        }
+        let pattern = &rows[rptr[s]..rptr[s + 1]];
+        let nrows = ncols + pattern.len();
+        let block = &values[vptr[s]..vptr[s + 1]];
+        for c in (0..ncols.min(stop - start)).rev() {
+            let col = &block[c * nrows..(c + 1) * nrows];
+            let i = start + c;
+            let mut a = [0.0; K];
+            a.copy_from_slice(&w[K * i..K * (i + 1)]);
+            for (wt, &l) in w[K * (i + 1)..K * (start + ncols)]
+                .chunks_exact(K)
+                .zip(&col[c + 1..ncols])
+            {
+                for k in 0..K {
+                    a[k] -= l * wt[k];
+                }
+            }
+            for (&t, &l) in pattern.iter().zip(&col[ncols..]) {
+                for k in 0..K {
+                    a[k] -= l * w[K * t + k];
+                }
+            }
+            for k in 0..K {
+                w[K * i + k] = a[k] / col[c];
+            }
+        }
+    }
+}
