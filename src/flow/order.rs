@@ -4,8 +4,10 @@
 //! On grids from 2^18 cells (513²), and from 2^16 cells (257²) when at least 60 % of the
 //! cells carry unknowns, the order is a geometric nested dissection ([`nd_order`]): each
 //! rectangle cut across its longer side by the row or column with the fewest unknowns
-//! within an eighth of its length from the middle, the two sides ordered first, the cut
-//! last, down to rectangles of 8 cells. Its top cuts become large dense supernodes, which
+//! within an eighth of its length from the middle (the whole grid's: within a 64th of it
+//! from the line that halves the unknowns, so that the two sides, factored at once, take
+//! about the same time), the two sides ordered first, the cut last, down to rectangles of
+//! 8 cells. Its top cuts become large dense supernodes, which
 //! faer factors with dense kernels near the core's peak: on the mostly open gaps of a
 //! contact sweep (84–100 % open) it needs 1.3–3.7× fewer flops than the minimum-degree
 //! order below (2049², Δ = 0.05 h_s: 1.67e11 against 2.55e11; 1025², Δ = 0.5 h_s: 1.62e10
