@@ -62,8 +62,8 @@ pub struct Outcome {
 
 /// The vectors of [`refined`], allocated once for a whole solve (like [`Inner`]'s):
 /// allocated afresh for every step, a 10-million-unknown grid faulted in and zeroed some
-/// 0.5 GB each time. Faulted in when allocated ([`crate::alloc::zeroed_now`], or made ahead), not inside
-/// the solve.
+/// 0.5 GB each time. Faulted in when allocated ([`crate::alloc::zeroed_now`]) or made
+/// ahead ([`ZeroedAhead`]), not inside the solve.
 pub struct Work {
     /// The residual (the inner solve's right-hand side) and the correction.
     r: Vec<f64>,
@@ -71,13 +71,8 @@ pub struct Work {
 }
 
 impl Work {
-    /// The vectors for systems of `n` unknowns.
-    pub fn new(n: usize) -> Self {
-        Self::from(&mut ZeroedAhead::none(), n)
-    }
-
-    /// [`Work::new`] with the vectors taken from `ahead`.
-    pub fn from(ahead: &mut ZeroedAhead, n: usize) -> Self {
+    /// The vectors for systems of `n` unknowns, taken from `ahead` (made there or now).
+    pub fn new(ahead: &mut ZeroedAhead, n: usize) -> Self {
         Work {
             r: ahead.take(n),
             d: ahead.take(n),
@@ -94,13 +89,8 @@ pub struct Inner {
 }
 
 impl Inner {
-    /// The vectors for systems of `n` unknowns.
-    pub fn new(n: usize) -> Self {
-        Self::from(&mut ZeroedAhead::none(), n)
-    }
-
-    /// [`Inner::new`] with the vectors taken from `ahead`.
-    pub fn from(ahead: &mut ZeroedAhead, n: usize) -> Self {
+    /// The vectors for systems of `n` unknowns, taken from `ahead` (made there or now).
+    pub fn new(ahead: &mut ZeroedAhead, n: usize) -> Self {
         Inner {
             z: ahead.take(n),
             p: ahead.take(n),

@@ -266,16 +266,19 @@ pub(super) fn rate_error(x: &[f64], r: &[f64]) -> f64 {
     parts.iter().sum()
 }
 
-/// `φ` and `ψ` by multigrid-preconditioned CG with iterative refinement ([`cg::refined`]),
-/// each until its relative residual is `≤ tol` and its flow rate is accurate to `tol`
-/// (estimated from the exact residual by [`rate_error`]); then the inlet and outlet rates must agree to [`FLUX_AGREEMENT`]. The
-/// inner `Err` is the failure to report (or to recover from with the direct solver).
-/// `b_in`, `b_out`: the reservoirs' vectors on the unknowns ([`Multigrid::gather`]); `φ` and
-/// `ψ` come back on the grid's cells. Each is held dense only while it is a right-hand side
-/// (as the other solve's rate weight it has only the inlet or outlet row's entries).
 /// φ and ψ on the unknowns (not scattered to the grid: [`super::axis0`] reads them through
 /// the unknowns' index), the residual and the iterations.
 type MultigridOk = (Vec<f64>, Vec<f64>, f64, usize);
+
+/// `φ` and `ψ` by multigrid-preconditioned CG with iterative refinement ([`cg::refined`]),
+/// each until its relative residual is `≤ tol` and its flow rate is accurate to `tol`
+/// (estimated from the exact residual by [`rate_error`]); then the inlet and outlet rates
+/// must agree to [`FLUX_AGREEMENT`]. The inner `Err` is the failure to report (or to
+/// recover from with the direct solver). `b_in`: the inlet's vector on the unknowns
+/// ([`Multigrid::gather_row`]), `b_out` the outlet's non-zero entries
+/// ([`Multigrid::row_entries`]); each is held dense only while it is a right-hand side (as
+/// the other solve's rate weight it has only its row's entries). `ahead`: the solve's
+/// vectors, made ahead ([`multigrid_vectors`]).
 pub(super) fn solve_multigrid(
     mg: &Multigrid,
     b_in: Vec<f64>,
@@ -310,7 +313,7 @@ pub(super) fn solve_multigrid(
             rate.max(jacobi / qtol)
         }
     }
-    let mut work = cg::Work::from(&mut ahead, n);
+    let mut work = cg::Work::new(&mut ahead, n);
     let mut correction = Correction::new(mg, opts.should_stop, &mut ahead);
     let mut correct = |r: &mut [f64], r_norm: f64, d: &mut [f64], max_iter: usize| {
         correction.correct(r, r_norm, d, max_iter)
@@ -421,7 +424,7 @@ impl<'a> Correction<'a> {
         Correction {
             mg,
             should_stop,
-            inner: cg::Inner::from(ahead, m),
+            inner: cg::Inner::new(ahead, m),
             s: ahead.take(own),
             xs: ahead.take(own),
         }
