@@ -654,4 +654,55 @@ mod tests {
         assert!(q1 <= 4.0 * e1.max(1e-16) && q1 < 1e-10, "{q1:e} {e1:e}");
         assert!(q2 <= 4.0 * e2.max(1e-16) && q2 < 1e-10, "{q2:e} {e2:e}");
     }
+
+    /// A factor in halves on a grid above [`halves::MIN_UNKNOWNS`], and a later operator
+    /// with 2 % of its cells closed factored on its kept analysis (identity rows for the
+    /// closed ones): both in halves, the later one reused, its residuals (summed exactly)
+    /// within 10× a fresh factor's and at round-off, with one column and with two.
+    #[test]
+    fn a_kept_analysis_in_halves_factors_a_later_operator() {
+        let (ny, nx) = (300, 260);
+        let n = ny * nx;
+        let u = crate::flow::tests::lcg(21, n);
+        let c1: Vec<f64> = u.iter().map(|&v| 10f64.powf(-4.0 * v)).collect();
+        let (st1, _) = fine_stencil(&c1, ny, nx, true);
+        let f1 = Factor::new(&st1, None).unwrap();
+        let halved = |f: &Factor| matches!(f.analysis.structure, Structure::Halves(_));
+        assert!(halved(&f1));
+        let closed = crate::flow::tests::lcg(22, n);
+        let c2: Vec<f64> = c1
+            .iter()
+            .zip(&closed)
+            .map(|(&c, &z)| if z < 0.02 { 0.0 } else { c })
+            .collect();
+        let (st2, b1) = fine_stencil(&c2, ny, nx, true);
+        let b2: Vec<f64> = crate::flow::tests::lcg(23, n)
+            .iter()
+            .zip(&st2.active)
+            .map(|(&v, &on)| if on { v - 0.5 } else { 0.0 })
+            .collect();
+        let mut kept = Factor::new_reusing(&st2, None, Some(f1.analysis())).unwrap();
+        assert!(kept.reused() && halved(&kept));
+        let mut fresh = Factor::new(&st2, None).unwrap();
+        let mut r = vec![0.0; n];
+        let mut rel = |x: &[f64], b: &[f64]| {
+            st2.residual_compensated(x, b, &mut r);
+            cg::dot(&r, &r).sqrt() / cg::dot(b, b).sqrt()
+        };
+        let (mut x1, mut x2, mut y1, mut y2) =
+            (vec![0.0; n], vec![0.0; n], vec![0.0; n], vec![0.0; n]);
+        kept.solve_pair(&b1, &b2, &mut x1, &mut x2);
+        fresh.solve_pair(&b1, &b2, &mut y1, &mut y2);
+        for (x, y, b) in [(&x1, &y1, &b1), (&x2, &y2, &b2)] {
+            let (p, q) = (rel(x, b), rel(y, b));
+            assert!(
+                p < 1e-10 && p <= 10.0 * q.max(1e-16),
+                "kept {p:e}, fresh {q:e}"
+            );
+        }
+        // One column (the second solved as zeros).
+        let mut z = vec![0.0; n];
+        let res = kept.solve(&st2, &b1, &mut z);
+        assert!(res < 1e-12 && rel(&z, &b1) < 1e-12, "{res:e}");
+    }
 }
