@@ -46,6 +46,7 @@ use std::sync::Arc;
 use super::assemble::Stencil;
 use super::cg;
 use super::halves;
+use super::llt::{failed, llt_values};
 use super::lower::lower_csc;
 use super::substitution::supernodal_solve;
 use crate::error::{Error, Result};
@@ -55,14 +56,6 @@ const REFINE: usize = 4;
 
 /// [`Factor::solve`] stops refining once the relative residual is at or below this.
 const REFINED: f64 = 1e-15;
-
-fn failed(what: impl std::fmt::Display) -> Error {
-    Error::NotConverged {
-        iterations: 0,
-        residual: f64::NAN,
-        what: format!("reynolds-flow sparse Cholesky ({what})"),
-    }
-}
 
 /// The ordering and symbolic analysis of a factor: the grid cells it has unknowns for and
 /// the structure of the factor of the operator on them (its couplings along every grid face
@@ -124,7 +117,8 @@ pub struct Factor {
     /// (`None`: all are).
     live: Option<Vec<bool>>,
     numeric: Numeric,
-    /// Two columns in the factor's order, one after the other ([`supernodal_solve`]).
+    /// Two columns, one after the other: in the factor's order ([`supernodal_solve`]), or by
+    /// unknown for a factor in halves.
     work: Vec<f64>,
     /// Whether the analysis was a kept one.
     reused: bool,
@@ -152,25 +146,7 @@ fn whole_numeric(
     a: &SparseColMat<usize, f64>,
     par: Par,
 ) -> Result<Numeric> {
-    let scratch = symbolic.factorize_numeric_llt_scratch::<f64>(par, Default::default());
-    // Zeroed pages from the kernel: the factorisation writes every value, so filling
-    // them here too would be a pass over the whole factor for nothing.
-    let mut values: Vec<f64> = crate::alloc::try_zeroed(symbolic.len_val(), "the factor")
-        .map_err(|_| failed("out of memory"))?;
-    {
-        let mut buf = MemBuffer::try_new(scratch).map_err(|_| failed("out of memory"))?;
-        symbolic
-            .factorize_numeric_llt::<f64>(
-                &mut values,
-                a.as_ref(),
-                Side::Lower,
-                Default::default(),
-                par,
-                MemStack::new(&mut buf),
-                Default::default(),
-            )
-            .map_err(|e| failed(format!("{e:?}")))?;
-    }
+    let values = llt_values(symbolic, a, par)?;
     let solve_buf = MemBuffer::try_new(symbolic.solve_in_place_scratch::<f64>(2, par))
         .map_err(|_| failed("out of memory"))?;
     Ok(Numeric::Whole { values, solve_buf })
@@ -298,7 +274,6 @@ impl Factor {
         };
         let m = on.len();
         let reused = reuse.is_some();
-        let t_matrix0 = t0;
         let (mut t_order, mut t_symbolic, mut t_matrix) = (0.0, 0.0, 0.0);
         // The whole matrix, unless the analysis is in halves (each builds its own).
         let whole_matrix = |on: &[usize]| {
@@ -312,7 +287,7 @@ impl Factor {
                     Structure::Whole(_) => Matrices::Whole(whole_matrix(&an.cells)),
                     Structure::Halves(h) => Matrices::Halves(h.matrices(st, &index, &an.cells)),
                 };
-                t_matrix = cg::secs(t_matrix0);
+                t_matrix = cg::secs(t0);
                 (an, matrices)
             }
             None => {
@@ -329,6 +304,8 @@ impl Factor {
                 let (structure, matrices) = match halved {
                     Some(cut) => {
                         let (h, mats) = halves::Analysis::new(st, &index, &cells, &fwd, cut)?;
+                        // The sides' matrices are built with their analyses.
+                        t_symbolic = cg::secs(t0);
                         (Structure::Halves(h), Matrices::Halves(mats))
                     }
                     None => {
@@ -351,9 +328,6 @@ impl Factor {
                         (Structure::Whole(symbolic), Matrices::Whole(a))
                     }
                 };
-                if halved.is_some() {
-                    t_symbolic = cg::secs(t0);
-                }
                 let an = Arc::new(Analysis {
                     ny: st.ny,
                     nx: st.nx,
@@ -455,18 +429,19 @@ impl Factor {
         };
         let symbolic = match (&an.structure, &mut self.numeric) {
             (Structure::Halves(h), Numeric::Halves(f)) => {
-                // By unknown, solved in place.
-                // Two columns at once (a second of zeros with one).
-                let mut by_unknown: [Vec<f64>; 2] = [0, 1].map(|c| {
-                    (0..m)
-                        .map(|q| match cols.get(c) {
+                // By unknown in `work`, solved in place, two columns at once (a second of
+                // zeros with one).
+                let (w0, w1) = self.work.split_at_mut(m);
+                for (c, w) in [&mut *w0, &mut *w1].into_iter().enumerate() {
+                    for (q, v) in w.iter_mut().enumerate() {
+                        *v = match cols.get(c) {
                             Some(col) if live(q) => col.0[cells[q]],
                             _ => 0.0,
-                        })
-                        .collect()
-                });
-                f.solve(h, &mut by_unknown);
-                for (c, x) in by_unknown.iter().enumerate().take(cols.len()) {
+                        };
+                    }
+                }
+                f.solve(h, [&mut *w0, &mut *w1]);
+                for (c, x) in [&*w0, &*w1].into_iter().enumerate().take(cols.len()) {
                     for (q, &v) in x.iter().enumerate() {
                         if live(q) {
                             set(&mut cols[c].1[cells[q]], v);

@@ -41,9 +41,10 @@ use faer::sparse::{SparseColMat, SymbolicSparseColMat};
 use faer::{Accum, Mat, Par, Side};
 
 use super::assemble::Stencil;
+use super::llt::{failed, llt_values};
 use super::lower::lower_csc;
 use super::substitution::{supernodal_backward, supernodal_forward};
-use crate::error::{Error, Result};
+use crate::error::Result;
 
 /// Grids with at least this many unknowns are factored in halves when their order has a
 /// top cut (fewer: the two threads' start and the separator's dense work cost more than
@@ -53,14 +54,6 @@ pub const MIN_UNKNOWNS: usize = 1 << 15;
 /// Largest separator factored in halves: its dense blocks (four of `k²` values) stay a
 /// small part of the factor's memory.
 pub const MAX_SEPARATOR: usize = 1 << 13;
-
-fn failed(what: impl std::fmt::Display) -> Error {
-    Error::NotConverged {
-        iterations: 0,
-        residual: f64::NAN,
-        what: format!("reynolds-flow sparse Cholesky in halves ({what})"),
-    }
-}
 
 /// One side's principal submatrix `M = A[side ∪ S, side ∪ S]` and its symbolic factor,
 /// the matrix in elimination order (the side's unknowns, then the separator's).
@@ -223,23 +216,8 @@ impl Factor {
         }
         let side = |sa: &SideAnalysis, a: Lower| -> Result<(Vec<f64>, Mat<f64>)> {
             let symbolic = &sa.symbolic;
-            let scratch =
-                symbolic.factorize_numeric_llt_scratch::<f64>(Par::Seq, Default::default());
-            let mut values: Vec<f64> = crate::alloc::try_zeroed(symbolic.len_val(), "the factor")
-                .map_err(|_| failed("out of memory"))?;
-            let mut buf = MemBuffer::try_new(scratch).map_err(|_| failed("out of memory"))?;
-            symbolic
-                .factorize_numeric_llt::<f64>(
-                    &mut values,
-                    a.as_ref(),
-                    Side::Lower,
-                    Default::default(),
-                    Par::Seq,
-                    MemStack::new(&mut buf),
-                    Default::default(),
-                )
-                .map_err(|e| failed(format!("{e:?}")))?;
-            drop((buf, a));
+            let values = llt_values(symbolic, &a, Par::Seq)?;
+            drop(a);
             // The separator block `L_X` (rows and columns `own..`), then `L_X L_Xᵀ`.
             let (own, k) = (sa.own, sa.unknowns.len() - sa.own);
             let mut lx = Mat::<f64>::zeros(k, k);
@@ -300,7 +278,11 @@ impl Factor {
             MemStack::new(&mut buf),
             Default::default(),
         )
-        .map_err(|e| failed(format!("the separator's Schur complement: {e:?}")))?;
+        .map_err(|e| {
+            failed(format!(
+                "in halves, the separator's Schur complement: {e:?}"
+            ))
+        })?;
         Ok(Factor {
             values: [va, vb],
             ls: s,
@@ -310,9 +292,10 @@ impl Factor {
     /// `A x = b` for the two columns of `cols` (by unknown, in the analysis's cells'
     /// order), overwritten with `x`: on each side both columns at once, interleaved
     /// (one pass over the side's factor each way).
-    pub fn solve(&self, an: &Analysis, cols: &mut [Vec<f64>; 2]) {
+    pub fn solve(&self, an: &Analysis, cols: [&mut [f64]; 2]) {
         let k = an.k;
-        let forward = |sa: &SideAnalysis, values: &[f64], cols: &[Vec<f64>; 2]| -> Vec<f64> {
+        let b: [&[f64]; 2] = [&*cols[0], &*cols[1]];
+        let forward = |sa: &SideAnalysis, values: &[f64], cols: [&[f64]; 2]| -> Vec<f64> {
             let mut w = vec![0.0; 2 * sa.unknowns.len()];
             for (p, &q) in sa.unknowns[..sa.own].iter().enumerate() {
                 w[2 * p] = cols[0][q];
@@ -322,14 +305,14 @@ impl Factor {
             w
         };
         let (mut wa, mut wb) = rayon::join(
-            || forward(&an.sides[0], &self.values[0], cols),
-            || forward(&an.sides[1], &self.values[1], cols),
+            || forward(&an.sides[0], &self.values[0], b),
+            || forward(&an.sides[1], &self.values[1], b),
         );
         // The separator's right-hand side: `b_S − L_SA y_A − L_SB y_B`.
         let sep = &an.sides[0].unknowns[an.sides[0].own..];
         let (oa, ob) = (an.sides[0].own, an.sides[1].own);
         let mut u = Mat::<f64>::from_fn(k, 2, |i, c| {
-            cols[c][sep[i]] + wa[2 * (oa + i) + c] + wb[2 * (ob + i) + c]
+            b[c][sep[i]] + wa[2 * (oa + i) + c] + wb[2 * (ob + i) + c]
         });
         solve_lower_triangular_in_place(self.ls.as_ref(), u.as_mut(), Par::Seq);
         solve_upper_triangular_in_place(self.ls.transpose(), u.as_mut(), Par::Seq);
@@ -346,7 +329,7 @@ impl Factor {
             || backward(&an.sides[0], &self.values[0], &mut wa),
             || backward(&an.sides[1], &self.values[1], &mut wb),
         );
-        for (c, x) in cols.iter_mut().enumerate() {
+        for (c, x) in cols.into_iter().enumerate() {
             for (sa, w) in an.sides.iter().zip([&wa, &wb]) {
                 for (p, &q) in sa.unknowns[..sa.own].iter().enumerate() {
                     x[q] = w[2 * p + c];
@@ -400,7 +383,8 @@ mod tests {
                 .map(|(&v, &on)| if on { v - 0.5 } else { 0.0 })
                 .collect();
             let mut cols: [Vec<f64>; 2] = [&b1, &b2].map(|b| cells.iter().map(|&k| b[k]).collect());
-            f.solve(&an, &mut cols);
+            let [c0, c1] = &mut cols;
+            f.solve(&an, [c0, c1]);
             let mut whole = direct::Factor::new(&st, None).unwrap();
             let (mut w1, mut w2) = (vec![0.0; n], vec![0.0; n]);
             whole.solve_pair(&b1, &b2, &mut w1, &mut w2);

@@ -44,6 +44,7 @@ pub mod direct;
 pub mod gth;
 mod halves;
 pub mod kept;
+mod llt;
 mod lower;
 pub mod multigrid;
 pub mod order;
