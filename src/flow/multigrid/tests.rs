@@ -1,3 +1,4 @@
+use super::columns::{Absolute, Columns, Offsets};
 use super::cycle::{level_cycle, Fine, W_LEVELS};
 use super::*;
 use crate::flow::assemble::fine_stencil;
