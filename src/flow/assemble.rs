@@ -14,6 +14,8 @@
 
 use rayon::prelude::*;
 
+use super::compensated::{self, Compensated};
+
 /// Rows per parallel task: large enough that a task costs far more than handing it out.
 pub(crate) const ROWS_PER_TASK: usize = 8;
 
@@ -146,6 +148,32 @@ impl Stencil {
         self.e.len() == n && self.s.len() == n
     }
 
+    /// The four faces of cell `k` as `(neighbour, conductance)` in the order of
+    /// [`Stencil::for_each_face`] (east, west, south, north), a missing one as `(k, 0)`: the
+    /// same faces without a closure, for the kernels compiled with a fused multiply-add
+    /// (a closure is compiled apart, without it).
+    #[inline(always)]
+    fn faces_of(&self, k: usize) -> [(usize, f64); 4] {
+        let (ny, nx) = (self.ny, self.nx);
+        let (i, j) = (k / nx, k % nx);
+        let base = i * nx;
+        let (e, s) = (&self.e, &self.s);
+        let east = if j + 1 < nx {
+            (k + 1, e[k])
+        } else if self.periodic && nx > 1 {
+            (base, e[k])
+        } else {
+            (k, 0.0)
+        };
+        let west = match self.west(j) {
+            Some(wj) => (base + wj, e[base + wj]),
+            None => (k, 0.0),
+        };
+        let south = if i + 1 < ny { (k + nx, s[k]) } else { (k, 0.0) };
+        let north = if i > 0 { (k - nx, s[k - nx]) } else { (k, 0.0) };
+        [east, west, south, north]
+    }
+
     /// [`Stencil::for_each_face`] without bounds checks, for a loop over many cells that
     /// checks [`Stencil::faces_complete`] once (the multigrid's product with its Schur
     /// complement).
@@ -211,120 +239,146 @@ impl Stencil {
         chunk: usize,
     ) {
         debug_assert!(matches!(parts.len(), 1 | 2));
-        let (hi, lo) = (parts[0], parts.get(1).copied());
+        let fused = compensated::fused();
         r.par_chunks_mut(chunk).enumerate().for_each(|(blk, rc)| {
-            let i0 = blk * chunk;
-            for (t, rv) in rc.iter_mut().enumerate() {
-                let i = i0 + t;
-                let k = cells[i] as usize;
-                let mut acc = Compensated::new(b[i]);
-                acc.add_product(-self.dir[k], hi[i]);
-                if let Some(lo) = lo {
-                    acc.err -= self.dir[k] * lo[i];
-                }
-                self.for_each_face(k, |l, c| match index[l] {
-                    u32::MAX => acc.add_face(c, 0.0, hi[i], lo.map(|lo| -lo[i])),
-                    j => {
-                        let j = j as usize;
-                        acc.add_face(c, hi[j], hi[i], lo.map(|lo| lo[j] - lo[i]))
-                    }
-                });
-                *rv = acc.value();
+            let on = Unknowns {
+                cells,
+                index,
+                i0: blk * chunk,
+            };
+            if fused {
+                // SAFETY: `fused` checked that the CPU has a fused multiply-add.
+                unsafe { self.residual_unknowns_fused(on, parts, b, rc) }
+            } else {
+                self.residual_unknowns::<false>(on, parts, b, rc)
             }
         });
+    }
+
+    /// The rows of [`Stencil::residual_compensated_on`] from unknown `on.i0` on, products
+    /// split by fused multiply-add (`FUSED`) or Dekker's splitting ([`compensated`]).
+    #[inline(always)]
+    fn residual_unknowns<const FUSED: bool>(
+        &self,
+        on: Unknowns,
+        parts: &[&[f64]],
+        b: &[f64],
+        rc: &mut [f64],
+    ) {
+        let (hi, lo) = (parts[0], parts.get(1).copied());
+        let Unknowns { cells, index, i0 } = on;
+        for (t, rv) in rc.iter_mut().enumerate() {
+            let i = i0 + t;
+            let k = cells[i] as usize;
+            let mut acc = Compensated::<FUSED>::new(b[i]);
+            acc.add_product(-self.dir[k], hi[i]);
+            if let Some(lo) = lo {
+                acc.err -= self.dir[k] * lo[i];
+            }
+            for (l, c) in self.faces_of(k) {
+                if c > 0.0 {
+                    match index[l] {
+                        u32::MAX => acc.add_face(c, 0.0, hi[i], lo.map(|lo| -lo[i])),
+                        j => {
+                            let j = j as usize;
+                            acc.add_face(c, hi[j], hi[i], lo.map(|lo| lo[j] - lo[i]))
+                        }
+                    }
+                }
+            }
+            *rv = acc.value();
+        }
+    }
+
+    /// [`Stencil::residual_unknowns`] with the fused multiply-add.
+    ///
+    /// # Safety
+    ///
+    /// The CPU has a fused multiply-add ([`compensated::fused`]).
+    #[cfg_attr(target_arch = "x86_64", target_feature(enable = "fma"))]
+    unsafe fn residual_unknowns_fused(
+        &self,
+        on: Unknowns,
+        parts: &[&[f64]],
+        b: &[f64],
+        rc: &mut [f64],
+    ) {
+        self.residual_unknowns::<true>(on, parts, b, rc)
     }
 
     /// `r = b − A Σ parts`, each row summed in double-double arithmetic from the faces and
     /// the reservoir conductance, not the rounded diagonal: a face below ε d_k is part of the
     /// residual too.
     fn residual_of_parts(&self, parts: &[&[f64]], b: &[f64], r: &mut [f64]) {
-        let nx = self.nx;
+        self.residual_of_parts_with(compensated::fused(), parts, b, r)
+    }
+
+    /// [`Stencil::residual_of_parts`] with (`fused`, on a CPU that has it) or without the
+    /// fused multiply-add: the same bits either way.
+    fn residual_of_parts_with(&self, fused: bool, parts: &[&[f64]], b: &[f64], r: &mut [f64]) {
         debug_assert!(matches!(parts.len(), 1 | 2));
-        let (hi, lo) = (parts[0], parts.get(1).copied());
-        r.par_chunks_mut(nx)
+        r.par_chunks_mut(self.nx)
             .enumerate()
             .with_min_len(ROWS_PER_TASK)
             .for_each(|(i, rrow)| {
-                for (j, rv) in rrow.iter_mut().enumerate() {
-                    let k = i * nx + j;
-                    if !self.active[k] {
-                        *rv = b[k] - self.d[k] * parts.iter().map(|x| x[k]).sum::<f64>();
-                        continue;
-                    }
-                    let mut acc = Compensated::new(b[k]);
-                    acc.add_product(-self.dir[k], hi[k]);
-                    if let Some(lo) = lo {
-                        acc.err -= self.dir[k] * lo[k];
-                    }
-                    self.for_each_face(k, |l, c| {
-                        acc.add_face(c, hi[l], hi[k], lo.map(|lo| lo[l] - lo[k]));
-                    });
-                    *rv = acc.value();
+                if fused {
+                    // SAFETY: `fused` checked that the CPU has a fused multiply-add.
+                    unsafe { self.residual_row_fused(i, parts, b, rrow) }
+                } else {
+                    self.residual_row::<false>(i, parts, b, rrow)
                 }
             });
     }
-}
 
-/// A sum carried as a double and its rounding error (Ogita, Rump & Oishi's `Dot2`).
-struct Compensated {
-    sum: f64,
-    err: f64,
-}
-
-impl Compensated {
+    /// Row `i` of [`Stencil::residual_of_parts`], products split by fused multiply-add
+    /// (`FUSED`) or Dekker's splitting ([`compensated`]).
     #[inline(always)]
-    fn new(v: f64) -> Self {
-        Compensated { sum: v, err: 0.0 }
+    fn residual_row<const FUSED: bool>(
+        &self,
+        i: usize,
+        parts: &[&[f64]],
+        b: &[f64],
+        rrow: &mut [f64],
+    ) {
+        let (hi, lo) = (parts[0], parts.get(1).copied());
+        for (j, rv) in rrow.iter_mut().enumerate() {
+            let k = i * self.nx + j;
+            if !self.active[k] {
+                *rv = b[k] - self.d[k] * parts.iter().map(|x| x[k]).sum::<f64>();
+                continue;
+            }
+            let mut acc = Compensated::<FUSED>::new(b[k]);
+            acc.add_product(-self.dir[k], hi[k]);
+            if let Some(lo) = lo {
+                acc.err -= self.dir[k] * lo[k];
+            }
+            for (l, c) in self.faces_of(k) {
+                if c > 0.0 {
+                    acc.add_face(c, hi[l], hi[k], lo.map(|lo| lo[l] - lo[k]));
+                }
+            }
+            *rv = acc.value();
+        }
     }
 
-    /// Adds `a b` exactly (to the error of the final rounding).
-    #[inline(always)]
-    fn add_product(&mut self, a: f64, b: f64) {
-        let (p, pe) = two_product(a, b);
-        let (s, se) = two_sum(self.sum, p);
-        self.sum = s;
-        self.err += se + pe;
-    }
-
-    /// Adds the face flux `c (x_l − x_k)`, `x = hi + lo` (`dlo = lo_l − lo_k`): the
-    /// difference of the high parts split exactly into `s + e` ([`two_sum`]), `c s` added
-    /// exactly and `c (e + dlo)` rounded, an error of order `ε² |c (x_l − x_k)|`. One
-    /// error-free sum and product per face, not two per part: the row's chain of dependent
-    /// sums is a quarter as long for `hi + lo`.
-    #[inline(always)]
-    fn add_face(&mut self, c: f64, hi_l: f64, hi_k: f64, dlo: Option<f64>) {
-        let (s, e) = two_sum(hi_l, -hi_k);
-        self.add_product(c, s);
-        self.err += c * (e + dlo.unwrap_or(0.0));
-    }
-
-    #[inline(always)]
-    fn value(&self) -> f64 {
-        self.sum + self.err
+    /// [`Stencil::residual_row`] with the fused multiply-add.
+    ///
+    /// # Safety
+    ///
+    /// The CPU has a fused multiply-add ([`compensated::fused`]).
+    #[cfg_attr(target_arch = "x86_64", target_feature(enable = "fma"))]
+    unsafe fn residual_row_fused(&self, i: usize, parts: &[&[f64]], b: &[f64], rrow: &mut [f64]) {
+        self.residual_row::<true>(i, parts, b, rrow)
     }
 }
 
-/// `a + b = s + e` exactly (Knuth).
-#[inline(always)]
-pub(super) fn two_sum(a: f64, b: f64) -> (f64, f64) {
-    let s = a + b;
-    let bb = s - a;
-    (s, (a - (s - bb)) + (b - bb))
-}
-
-/// `a b = p + e` exactly (Dekker's splitting; no fused multiply-add needed).
-#[inline(always)]
-fn two_product(a: f64, b: f64) -> (f64, f64) {
-    const SPLIT: f64 = 134_217_729.0; // 2^27 + 1
-    let p = a * b;
-    let split = |v: f64| {
-        let t = SPLIT * v;
-        let hi = t - (t - v);
-        (hi, v - hi)
-    };
-    let (ah, al) = split(a);
-    let (bh, bl) = split(b);
-    (p, ((ah * bh - p) + ah * bl + al * bh) + al * bl)
+/// Where a chunk of [`Stencil::residual_compensated_on`] starts: unknown `i0`, with the
+/// unknowns' cells and the cells' unknowns.
+#[derive(Clone, Copy)]
+struct Unknowns<'a> {
+    cells: &'a [u32],
+    index: &'a [u32],
+    i0: usize,
 }
 
 /// Harmonic mean of two cell conductances, `2 c1 c2 / (c1 + c2)`; 0 when either is 0.
@@ -382,4 +436,53 @@ pub fn fine_stencil(c: &[f64], ny: usize, nx: usize, periodic: bool) -> (Stencil
     };
     st.finish_diagonal();
     (st, rhs)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The residual rows with the fused multiply-add give the bits of those with Dekker's
+    /// splitting, on conductances over 300 decades (products and their errors down to the
+    /// subnormal range, where the fused path hands over to the splitting) and a solution
+    /// carried in one and in two doubles.
+    #[test]
+    fn fused_residual_rows_give_the_split_bits() {
+        if !compensated::fused() {
+            return;
+        }
+        let (ny, nx) = (23, 17);
+        let n = ny * nx;
+        let mut state = 0x2545_f491_4f6c_dd1d_u64;
+        let mut uniform = || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let c: Vec<f64> = (0..n)
+            .map(|_| {
+                let u = uniform();
+                if u < 0.1 {
+                    0.0
+                } else {
+                    10f64.powf(-300.0 * uniform())
+                }
+            })
+            .collect();
+        for periodic in [false, true] {
+            let (st, rhs) = fine_stencil(&c, ny, nx, periodic);
+            let hi: Vec<f64> = (0..n)
+                .map(|_| uniform() * 10f64.powf(-320.0 * uniform()))
+                .collect();
+            let lo: Vec<f64> = hi.iter().map(|v| v * 1e-17 * uniform()).collect();
+            for parts in [vec![&hi[..]], vec![&hi[..], &lo[..]]] {
+                let (mut r1, mut r2) = (vec![0.0; n], vec![0.0; n]);
+                st.residual_of_parts_with(true, &parts, &rhs, &mut r1);
+                st.residual_of_parts_with(false, &parts, &rhs, &mut r2);
+                let bits = |r: &[f64]| r.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+                assert_eq!(bits(&r1), bits(&r2));
+            }
+        }
+    }
 }

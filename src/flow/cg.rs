@@ -5,7 +5,7 @@ use std::time::Instant;
 
 use rayon::prelude::*;
 
-use super::assemble::two_sum;
+use super::compensated::two_sum;
 use crate::alloc::ZeroedAhead;
 use crate::error::{Error, Result};
 

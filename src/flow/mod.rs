@@ -40,6 +40,7 @@
 pub mod assemble;
 mod axis0;
 pub mod cg;
+mod compensated;
 pub mod direct;
 pub mod gth;
 mod halves;
