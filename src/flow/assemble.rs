@@ -153,9 +153,8 @@ impl Stencil {
     /// same faces without a closure, for the kernels compiled with a fused multiply-add
     /// (a closure is compiled apart, without it).
     #[inline(always)]
-    fn faces_of(&self, k: usize, rows: RowOf) -> [(usize, f64); 4] {
-        let (i, j) = rows.row_col(k);
-        self.faces_at(i, j)
+    fn faces_of(&self, k: usize) -> [(usize, f64); 4] {
+        self.faces_at(k / self.nx, k % self.nx)
     }
 
     /// [`Stencil::faces_of`] cell `(i, j)`, for a loop that walks a row.
@@ -274,7 +273,6 @@ impl Stencil {
     ) {
         let (hi, lo) = (parts[0], parts.get(1).copied());
         let Unknowns { cells, index, i0 } = on;
-        let rows = RowOf::new(self.nx);
         for (t, rv) in rc.iter_mut().enumerate() {
             let i = i0 + t;
             let k = cells[i] as usize;
@@ -283,7 +281,7 @@ impl Stencil {
             if let Some(lo) = lo {
                 acc.err -= self.dir[k] * lo[i];
             }
-            for (l, c) in self.faces_of(k, rows) {
+            for (l, c) in self.faces_of(k) {
                 if c > 0.0 {
                     match index[l] {
                         u32::MAX => acc.add_face(c, 0.0, hi[i], lo.map(|lo| -lo[i])),
@@ -380,35 +378,6 @@ impl Stencil {
     }
 }
 
-/// A cell's row and column, `k = i nx + j`, by a multiplication with `1/nx` and one
-/// correction instead of an integer division (some 40 cycles on some CPUs, per cell).
-#[derive(Clone, Copy)]
-struct RowOf {
-    nx: usize,
-    inv: f64,
-}
-
-impl RowOf {
-    fn new(nx: usize) -> Self {
-        RowOf {
-            nx,
-            inv: 1.0 / nx as f64,
-        }
-    }
-
-    /// `(k / nx, k % nx)`: the product is within one of the quotient for `k < 2^52`.
-    #[inline(always)]
-    fn row_col(self, k: usize) -> (usize, usize) {
-        let mut i = (k as f64 * self.inv) as usize;
-        if i * self.nx > k {
-            i -= 1;
-        } else if (i + 1) * self.nx <= k {
-            i += 1;
-        }
-        (i, k - i * self.nx)
-    }
-}
-
 /// Where a chunk of [`Stencil::residual_compensated_on`] starts: unknown `i0`, with the
 /// unknowns' cells and the cells' unknowns.
 #[derive(Clone, Copy)]
@@ -478,34 +447,6 @@ pub fn fine_stencil(c: &[f64], ny: usize, nx: usize, periodic: bool) -> (Stencil
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    /// A cell's row and column by the reciprocal are those of the integer division, at
-    /// every width up to the largest grids and at the ends of each row.
-    #[test]
-    fn row_and_column_by_the_reciprocal_are_the_division() {
-        for nx in [1usize, 2, 3, 7, 513, 1025, 4097, 8193, 65_537, 1 << 20] {
-            let rows = RowOf::new(nx);
-            for i in [
-                0usize,
-                1,
-                2,
-                3,
-                511,
-                4096,
-                8192,
-                65_535,
-                1 << 20,
-                (1 << 32) / nx,
-            ] {
-                for j in [0, 1, nx / 2, nx.saturating_sub(2), nx - 1] {
-                    if j < nx {
-                        let k = i * nx + j;
-                        assert_eq!(rows.row_col(k), (k / nx, k % nx), "nx {nx} k {k}");
-                    }
-                }
-            }
-        }
-    }
 
     /// The residual rows with the fused multiply-add give the bits of those with Dekker's
     /// splitting, on conductances over 300 decades (products and their errors down to the
