@@ -459,29 +459,28 @@ mod tests {
         }
         let (ny, nx) = (23, 17);
         let n = ny * nx;
-        let mut state = 0x2545_f491_4f6c_dd1d_u64;
-        let mut uniform = || {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            (state >> 11) as f64 / (1u64 << 53) as f64
-        };
-        let c: Vec<f64> = (0..n)
-            .map(|_| {
-                let u = uniform();
-                if u < 0.1 {
+        let u = crate::test_support::lcg(0x2545_f491_4f6c_dd1d, 6 * n);
+        let c: Vec<f64> = u[..2 * n]
+            .chunks_exact(2)
+            .map(|w| {
+                if w[0] < 0.1 {
                     0.0
                 } else {
-                    10f64.powf(-300.0 * uniform())
+                    10f64.powf(-300.0 * w[1])
                 }
             })
             .collect();
         for periodic in [false, true] {
             let (st, rhs) = fine_stencil(&c, ny, nx, periodic);
-            let hi: Vec<f64> = (0..n)
-                .map(|_| uniform() * 10f64.powf(-320.0 * uniform()))
+            let hi: Vec<f64> = u[2 * n..4 * n]
+                .chunks_exact(2)
+                .map(|w| w[0] * 10f64.powf(-320.0 * w[1]))
                 .collect();
-            let lo: Vec<f64> = hi.iter().map(|v| v * 1e-17 * uniform()).collect();
+            let lo: Vec<f64> = hi
+                .iter()
+                .zip(&u[4 * n..])
+                .map(|(v, w)| v * 1e-17 * w)
+                .collect();
             for parts in [vec![&hi[..]], vec![&hi[..], &lo[..]]] {
                 let (mut r1, mut r2) = (vec![0.0; n], vec![0.0; n]);
                 st.residual_of_parts_with(true, &parts, &rhs, &mut r1);
