@@ -43,7 +43,7 @@ use faer::{Accum, Mat, Par, Side};
 use super::assemble::Stencil;
 use super::llt::{failed, llt_values};
 use super::lower::lower_csc;
-use super::substitution::{supernodal_backward, supernodal_forward};
+use super::substitution::{supernodal_backward, supernodal_forward, Supernode};
 use crate::error::Result;
 
 /// Grids with at least this many unknowns are factored in halves when their order has a
@@ -222,22 +222,18 @@ impl Factor {
             let (own, k) = (sa.own, sa.unknowns.len() - sa.own);
             let mut lx = Mat::<f64>::zeros(k, k);
             let sn = supernodal(symbolic);
-            let (begin, end) = (sn.supernode_begin(), sn.supernode_end());
-            let (rptr, vptr, rows) = (sn.col_ptr_for_row_idx(), sn.col_ptr_for_val(), sn.row_idx());
             for t in 0..sn.n_supernodes() {
-                if end[t] <= own {
+                let node = Supernode::of(sn, &values, t);
+                let (start, ncols, pattern) = (node.start, node.ncols, node.pattern);
+                if start + ncols <= own {
                     continue;
                 }
-                let (start, ncols) = (begin[t], end[t] - begin[t]);
-                let pattern = &rows[rptr[t]..rptr[t + 1]];
-                let nrows = ncols + pattern.len();
-                let block = &values[vptr[t]..vptr[t + 1]];
                 for c in 0..ncols {
                     let j = start + c;
                     if j < own {
                         continue;
                     }
-                    let col = &block[c * nrows..(c + 1) * nrows];
+                    let col = node.column(c);
                     for (r, &l) in col[c..ncols].iter().enumerate() {
                         lx[(j + r - own, j - own)] = l;
                     }

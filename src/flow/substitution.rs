@@ -5,6 +5,41 @@
 
 use faer::sparse::linalg::cholesky::supernodal::SymbolicSupernodalCholesky;
 
+/// Supernode `s` of a supernodal factor with values `values`: its first column `start`, its
+/// `ncols` columns, the rows of its pattern below them, and its dense column-major block
+/// (`ncols + pattern.len()` rows: the diagonal block on top of the pattern's rows).
+pub(super) struct Supernode<'a> {
+    pub(super) start: usize,
+    pub(super) ncols: usize,
+    pub(super) pattern: &'a [usize],
+    pub(super) block: &'a [f64],
+}
+
+impl<'a> Supernode<'a> {
+    #[inline(always)]
+    pub(super) fn of(
+        sn: &'a SymbolicSupernodalCholesky<usize>,
+        values: &'a [f64],
+        s: usize,
+    ) -> Self {
+        let (start, end) = (sn.supernode_begin()[s], sn.supernode_end()[s]);
+        let (rptr, vptr) = (sn.col_ptr_for_row_idx(), sn.col_ptr_for_val());
+        Supernode {
+            start,
+            ncols: end - start,
+            pattern: &sn.row_idx()[rptr[s]..rptr[s + 1]],
+            block: &values[vptr[s]..vptr[s + 1]],
+        }
+    }
+
+    /// Column `c` of the block (its diagonal entry at `c`, the pattern's rows from `ncols`).
+    #[inline(always)]
+    pub(super) fn column(&self, c: usize) -> &'a [f64] {
+        let nrows = self.ncols + self.pattern.len();
+        &self.block[c * nrows..(c + 1) * nrows]
+    }
+}
+
 /// `L Lᵀ y = w` in place (positions in the factor's order) with the supernodal factor
 /// `values` of `sn`: each supernode is a dense column-major block, its diagonal block (lower
 /// triangle) on top of the rows of its pattern. Forward by columns (`y_c = w_c / L_cc`,
@@ -31,21 +66,15 @@ pub(super) fn supernodal_forward<const K: usize>(
     w: &mut [f64],
     stop: usize,
 ) {
-    let ns = sn.n_supernodes();
-    let (begin, end) = (sn.supernode_begin(), sn.supernode_end());
-    let (rptr, vptr) = (sn.col_ptr_for_row_idx(), sn.col_ptr_for_val());
-    let rows = sn.row_idx();
-    for s in 0..ns {
-        let (start, ncols) = (begin[s], end[s] - begin[s]);
-        let pattern = &rows[rptr[s]..rptr[s + 1]];
-        let nrows = ncols + pattern.len();
-        let block = &values[vptr[s]..vptr[s + 1]];
+    for s in 0..sn.n_supernodes() {
+        let node = Supernode::of(sn, values, s);
+        let (start, ncols, pattern) = (node.start, node.ncols, node.pattern);
         for c in 0..ncols {
             let i = start + c;
             if i >= stop {
                 return;
             }
-            let col = &block[c * nrows..(c + 1) * nrows];
+            let col = node.column(c);
             let mut y = [0.0; K];
             for (k, yk) in y.iter_mut().enumerate() {
                 *yk = w[K * i + k] / col[c];
@@ -76,20 +105,14 @@ pub(super) fn supernodal_backward<const K: usize>(
     w: &mut [f64],
     stop: usize,
 ) {
-    let ns = sn.n_supernodes();
-    let (begin, end) = (sn.supernode_begin(), sn.supernode_end());
-    let (rptr, vptr) = (sn.col_ptr_for_row_idx(), sn.col_ptr_for_val());
-    let rows = sn.row_idx();
-    for s in (0..ns).rev() {
-        let (start, ncols) = (begin[s], end[s] - begin[s]);
+    for s in (0..sn.n_supernodes()).rev() {
+        let node = Supernode::of(sn, values, s);
+        let (start, ncols, pattern) = (node.start, node.ncols, node.pattern);
         if start >= stop {
             continue;
         }
-        let pattern = &rows[rptr[s]..rptr[s + 1]];
-        let nrows = ncols + pattern.len();
-        let block = &values[vptr[s]..vptr[s + 1]];
         for c in (0..ncols.min(stop - start)).rev() {
-            let col = &block[c * nrows..(c + 1) * nrows];
+            let col = node.column(c);
             let i = start + c;
             let mut a = [0.0; K];
             a.copy_from_slice(&w[K * i..K * (i + 1)]);
