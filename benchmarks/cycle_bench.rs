@@ -1,0 +1,80 @@
+//! One cycle of the flow's multigrid preconditioner (`Multigrid::cycle`, from 0 on the
+//! Schur complement `S`: the W-cycle on the top two levels, the V-cycle below) on the rayon
+//! pool (all cores unless `RAYON_NUM_THREADS` says otherwise). Prints the median of 9
+//! rounds of 5 cycles and a hash of the cycle's result, which is the same for two builds
+//! exactly when their cycles give the same bits.
+//!
+//! ```text
+//! cargo bench --bench cycle_bench                       # 2049², random conductances
+//! python benchmarks/flow_conductances.py spectral_4097_1.01 /tmp/c4097.bin
+//! SIDE=4097 CONDUCTANCES=/tmp/c4097.bin cargo bench --bench cycle_bench
+//! ```
+//!
+//! `SIDE`: cells per side (default 2049). `CONDUCTANCES`: a file of `SIDE²` little-endian
+//! `f64` cell conductances in row-major order, 0 for closed cells, every open cell in a
+//! cluster joining the first and the last row (`benchmarks/flow_conductances.py` writes
+//! those of a cached contact gap); without it, every cell open with a conductance drawn over
+//! six decades. Wrapped across, flow along the rows. To compare two commits, copy this file
+//! into the other checkout and run it there too.
+
+use std::time::Instant;
+
+use leakpath::flow::assemble::fine_stencil;
+use leakpath::flow::multigrid::Multigrid;
+
+fn main() {
+    let side: usize = std::env::var("SIDE")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(2049);
+    let n = side * side;
+    let mut state = 0x2545_f491_4f6c_dd1d_u64;
+    let mut uniform = || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let c: Vec<f64> = match std::env::var("CONDUCTANCES") {
+        Ok(path) => std::fs::read(&path)
+            .unwrap_or_else(|e| panic!("CONDUCTANCES={path}: {e}"))
+            .chunks_exact(8)
+            .map(|b| f64::from_le_bytes(b.try_into().expect("8 bytes")))
+            .collect(),
+        Err(_) => (0..n).map(|_| 10f64.powf(-6.0 * uniform())).collect(),
+    };
+    assert_eq!(c.len(), n, "CONDUCTANCES must hold SIDE² = {n} values");
+    let (st, _) = fine_stencil(&c, side, side, true);
+    let t = Instant::now();
+    let mg = Multigrid::new(st);
+    let setup = t.elapsed().as_secs_f64();
+    let m = mg.reduced_len().expect("a grid large enough to reduce");
+    let s: Vec<f64> = (0..m).map(|_| uniform() - 0.5).collect();
+    let mut z = vec![0.0; m];
+    let mut ms: Vec<f64> = (0..9)
+        .map(|_| {
+            let t = Instant::now();
+            for _ in 0..5 {
+                mg.cycle(&s, &mut z);
+            }
+            t.elapsed().as_secs_f64() * 1e3 / 5.0
+        })
+        .collect();
+    ms.sort_by(f64::total_cmp);
+    assert!(
+        z.iter().all(|v| v.is_finite()),
+        "the cycle's result is finite"
+    );
+    let hash = z.iter().fold(0xcbf2_9ce4_8422_2325_u64, |h, v| {
+        (h ^ v.to_bits()).wrapping_mul(0x0100_0000_01b3)
+    });
+    println!(
+        "cycle on S of {side}² cells ({m} unknowns, {} levels, setup {setup:.2} s), {} \
+         threads: median {:.2} ms (rounds {:.2}–{:.2} ms), result hash {hash:016x}",
+        mg.n_levels(),
+        rayon::current_num_threads(),
+        ms[4],
+        ms[0],
+        ms[8],
+    );
+}
