@@ -35,8 +35,9 @@ factor or preconditioner, solve and fluxes for both). The child reports the wall
 that call, ``Q``, the unknowns and its peak resident set (``VmHWM``, whole process); a
 child that only imports and loads the gap gives the baseline. Every native library runs on
 ``--threads`` threads (``RAYON_NUM_THREADS``, ``OMP``/``MKL``/``OPENBLAS``/``NUMBA``).
-Times are medians of ``--repeats`` children; ``Q rel. diff`` is against leakpath
-``solver="auto"``.
+Times are medians of ``--repeats`` children, run round-robin (each method's k-th run
+before any method's next), so the medians of a ratio share the same stretch of a shared
+machine's load; ``Q rel. diff`` is against leakpath ``solver="auto"``.
 """
 
 from __future__ import annotations
@@ -258,6 +259,9 @@ def measure_all(a, methods, rows) -> None:
             continue
         base = child(a.python, "leakpath", "load", path, a.threads, a.timeout)
         base_mib = base.get("vmhwm_kib", 0) / 1024
+        # Round-robin: every method's k-th run before any method's (k+1)-th, so that the
+        # medians of a ratio come from the same stretch of time on a shared machine.
+        live: list[tuple[str, str, str]] = []
         for code, solver, py in methods:
             key = f"{code}:{solver}"
             if key in last and last[key] * a.growth > a.timeout:
@@ -266,15 +270,24 @@ def measure_all(a, methods, rows) -> None:
                                  f"projected above the {a.timeout:.0f} s timeout"))
                 print(n, key, "skipped", flush=True)
                 continue
-            runs = []
-            for k in range(a.repeats):
+            live.append((code, solver, py))
+        runs: dict[tuple[str, str, str], list[dict]] = {m: [] for m in live}
+        done: set[tuple[str, str, str]] = set()
+        for k in range(a.repeats):
+            for m in live:
+                if m in done:
+                    continue
+                code, solver, py = m
                 r = child(py, code, solver, path, a.threads, a.timeout)
-                runs.append(r)
+                runs[m].append(r)
                 print(n, code, solver, json.dumps(r), flush=True)
                 if "error" in r or (k == 0 and r["seconds"] > a.single_above):
-                    break
-            ok = [r for r in runs if "error" not in r]
-            row = dict(n=n, code=code, solver=solver, base_mib=base_mib, runs=len(runs))
+                    done.add(m)
+        for m in live:
+            code, solver, _ = m
+            key = f"{code}:{solver}"
+            ok = [r for r in runs[m] if "error" not in r]
+            row = dict(n=n, code=code, solver=solver, base_mib=base_mib, runs=len(runs[m]))
             if ok:
                 row.update(
                     seconds=statistics.median(r["seconds"] for r in ok),
@@ -286,8 +299,8 @@ def measure_all(a, methods, rows) -> None:
                     iterations=ok[0].get("iterations"), ok=len(ok),
                 )
                 last[key] = row["seconds"]
-            if len(ok) < len(runs):
-                row["error"] = [r for r in runs if "error" in r][0]["error"]
+            if len(ok) < len(runs[m]):
+                row["error"] = [r for r in runs[m] if "error" in r][0]["error"]
             rows.append(row)
 
 
@@ -307,8 +320,9 @@ def write(a, rows, started, load_before, load_after, petsc_py, note="") -> None:
         f"- command: `{' '.join([Path(sys.executable).name] + sys.argv)}`",
         f"- machine: {machine()}; **shared with other jobs** (load average before "
         f"{load_before}, after {load_after}): absolute times are noisy, ratios less so",
-        f"- threads per solve: {a.threads}; medians of {a.repeats} child processes (one "
-        f"child when the first took over {a.single_above:g} s: column 'runs')",
+        f"- threads per solve: {a.threads}; medians of {a.repeats} child processes, run "
+        f"round-robin across the methods (one child when the first took over "
+        f"{a.single_above:g} s: column 'runs')",
     ] + ([f"- **{note}**"] if note else [])
     for k, v in versions(a.python, petsc_py).items():
         lines.append(f"- {k}: {v}")
