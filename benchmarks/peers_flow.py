@@ -273,35 +273,45 @@ def measure_all(a, methods, rows) -> None:
             live.append((code, solver, py))
         runs: dict[tuple[str, str, str], list[dict]] = {m: [] for m in live}
         done: set[tuple[str, str, str]] = set()
-        for k in range(a.repeats):
-            for m in live:
-                if m in done:
-                    continue
-                code, solver, py = m
-                r = child(py, code, solver, path, a.threads, a.timeout)
-                runs[m].append(r)
-                print(n, code, solver, json.dumps(r), flush=True)
-                if "error" in r or (k == 0 and r["seconds"] > a.single_above):
-                    done.add(m)
-        for m in live:
-            code, solver, _ = m
-            key = f"{code}:{solver}"
-            ok = [r for r in runs[m] if "error" not in r]
-            row = dict(n=n, code=code, solver=solver, base_mib=base_mib, runs=len(runs[m]))
-            if ok:
-                row.update(
-                    seconds=statistics.median(r["seconds"] for r in ok),
-                    peak_mib=statistics.median(r["vmhwm_kib"] for r in ok) / 1024,
-                    warm_mib=statistics.median(r.get("warm_kib", 0) for r in ok) / 1024,
-                    Q=ok[0]["Q"], unknowns=ok[0]["unknowns"], ran=ok[0].get("ran", ""),
-                    inout=(abs(ok[0]["Q"] - ok[0]["Q_in"]) / ok[0]["Q"] if "Q_in" in ok[0]
-                           else ok[0].get("conservation")),
-                    iterations=ok[0].get("iterations"), ok=len(ok),
-                )
-                last[key] = row["seconds"]
-            if len(ok) < len(runs[m]):
-                row["error"] = [r for r in runs[m] if "error" in r][0]["error"]
-            rows.append(row)
+        try:
+            for k in range(a.repeats):
+                for m in live:
+                    if m in done:
+                        continue
+                    code, solver, py = m
+                    r = child(py, code, solver, path, a.threads, a.timeout)
+                    runs[m].append(r)
+                    print(n, code, solver, json.dumps(r), flush=True)
+                    if "error" in r or (k == 0 and r["seconds"] > a.single_above):
+                        done.add(m)
+        finally:
+            # Also when interrupted: the runs made so far are written.
+            add_rows(n, base_mib, runs, last, rows)
+
+
+def add_rows(n: int, base_mib: float, runs: dict, last: dict, rows: list) -> None:
+    """One row per method with at least one run: medians over its runs at size ``n``."""
+    for m, mruns in runs.items():
+        if not mruns:
+            continue
+        code, solver, _ = m
+        key = f"{code}:{solver}"
+        ok = [r for r in mruns if "error" not in r]
+        row = dict(n=n, code=code, solver=solver, base_mib=base_mib, runs=len(mruns))
+        if ok:
+            row.update(
+                seconds=statistics.median(r["seconds"] for r in ok),
+                peak_mib=statistics.median(r["vmhwm_kib"] for r in ok) / 1024,
+                warm_mib=statistics.median(r.get("warm_kib", 0) for r in ok) / 1024,
+                Q=ok[0]["Q"], unknowns=ok[0]["unknowns"], ran=ok[0].get("ran", ""),
+                inout=(abs(ok[0]["Q"] - ok[0]["Q_in"]) / ok[0]["Q"] if "Q_in" in ok[0]
+                       else ok[0].get("conservation")),
+                iterations=ok[0].get("iterations"), ok=len(ok),
+            )
+            last[key] = row["seconds"]
+        if len(ok) < len(mruns):
+            row["error"] = [r for r in mruns if "error" in r][0]["error"]
+        rows.append(row)
 
 
 def fmt_e(x: float | None) -> str:
