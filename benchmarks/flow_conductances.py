@@ -5,10 +5,9 @@ Usage (from the repository root, after ``benchmarks/flow_gaps.py`` has cached th
     python benchmarks/flow_conductances.py spectral_4097_1.01 /tmp/c4097.bin
 
 Writes ``(g / g_max)³`` (dimensionless; ``g_max`` the largest gap of a spanning cell) as
-little-endian ``float64`` in row-major order, 0 on contact, closed cells and the clusters
-that do not join the first row to the last (labelled by :func:`leakpath.label`, 4-connected,
-wrapped across the columns): the cells on which ``leakpath.flow(..., periodic=True)``
-solves for the pressure along axis 0.
+little-endian ``float64`` in row-major order, 0 outside the spanning clusters of
+:func:`leakpath.percolation` (flow along axis 0, wrapped across the columns): the cells on
+which ``leakpath.flow(..., periodic=True)`` solves for the pressure.
 """
 
 from __future__ import annotations
@@ -19,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 import leakpath
+from leakpath._percolation import SPANNING
 
 
 def main() -> None:
@@ -30,9 +30,10 @@ def main() -> None:
     a = ap.parse_args()
     d = np.load(a.cache / f"{a.case}.npz")
     gap, contact = d["gap"], d["contact"]
-    labels, _ = leakpath.label((gap > 0) & ~contact, connectivity=4, periodic=(False, True))
-    both = np.intersect1d(labels[0][labels[0] > 0], labels[-1][labels[-1] > 0])
-    spanning = np.isin(labels, both) & (labels > 0)
+    n = gap.shape[0]
+    perc = leakpath.percolation(gap, contact=contact, axis=0, periodic=True, dx=1.0 / n)
+    # Cluster k is entry k − 1 of `classes`; label 0 (contact) is never spanning.
+    spanning = np.concatenate([[False], perc.classes == SPANNING])[perc.labels]
     g_max = gap[spanning].max()
     c = np.where(spanning, (gap / g_max) ** 3, 0.0).astype("<f8")
     tmp = a.out.with_name(a.out.name + ".part")
