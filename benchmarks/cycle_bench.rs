@@ -19,6 +19,10 @@
 
 use std::time::Instant;
 
+#[path = "bench_support.rs"]
+mod bench_support;
+use bench_support::Uniform;
+
 use leakpath::flow::assemble::fine_stencil;
 use leakpath::flow::multigrid::Multigrid;
 
@@ -28,13 +32,8 @@ fn main() {
         .and_then(|s| s.parse().ok())
         .unwrap_or(2049);
     let n = side * side;
-    let mut state = 0x2545_f491_4f6c_dd1d_u64;
-    let mut uniform = || {
-        state ^= state << 13;
-        state ^= state >> 7;
-        state ^= state << 17;
-        (state >> 11) as f64 / (1u64 << 53) as f64
-    };
+    let mut seq = Uniform::new(0x2545_f491_4f6c_dd1d);
+    let mut uniform = || seq.next();
     let c: Vec<f64> = match std::env::var("CONDUCTANCES") {
         Ok(path) => std::fs::read(&path)
             .unwrap_or_else(|e| panic!("CONDUCTANCES={path}: {e}"))

@@ -11,18 +11,17 @@
 
 use std::time::Instant;
 
+#[path = "bench_support.rs"]
+mod bench_support;
+use bench_support::Uniform;
+
 use leakpath::flow::assemble::fine_stencil;
 
 fn main() {
     let (ny, nx) = (513, 513);
     let n = ny * nx;
-    let mut state = 0x2545_f491_4f6c_dd1d_u64;
-    let mut uniform = || {
-        state ^= state << 13;
-        state ^= state >> 7;
-        state ^= state << 17;
-        (state >> 11) as f64 / (1u64 << 53) as f64
-    };
+    let mut seq = Uniform::new(0x2545_f491_4f6c_dd1d);
+    let mut uniform = || seq.next();
     let c: Vec<f64> = (0..n)
         .map(|_| {
             if uniform() < 0.3 {
