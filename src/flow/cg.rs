@@ -223,11 +223,19 @@ const FLOOR_ACCEPT: f64 = 1e2;
 /// Refinement steps at most in [`refined`].
 const REFINE_STEPS: usize = 8;
 
-/// The inner solve of [`refined`]: `correct(r, ‖r‖₂, δ, max_iter)` sets `δ` to an
+/// A lean step of [`refined`] asks its inner solve for this fraction of `1/measure` (ten
+/// times the reduction the rate tests still ask for), at most [`LEAN_MAX`].
+pub const LEAN_MARGIN: f64 = 0.1;
+
+/// The least reduction a lean step asks for.
+pub const LEAN_MAX: f64 = 0.1;
+
+/// The inner solve of [`refined`]: `correct(r, ‖r‖₂, δ, rtol, max_iter)` sets `δ` to an
 /// approximate solution of `A δ = r` (preconditioned CG from 0 to a relative residual
-/// [`INNER_TOL`] in plain arithmetic, on `A` or on a reduced system; `r` may be
-/// overwritten) within `max_iter` iterations.
-pub type Correct<'a> = &'a mut dyn FnMut(&mut [f64], f64, &mut [f64], usize) -> Result<Outcome>;
+/// `rtol` in plain arithmetic, on `A` or on a reduced system; `r` may be overwritten)
+/// within `max_iter` iterations.
+pub type Correct<'a> =
+    &'a mut dyn FnMut(&mut [f64], f64, &mut [f64], f64, usize) -> Result<Outcome>;
 
 /// Iterative refinement around an inner solve ([`pcg`] through `correct`): from `x`,
 /// repeatedly the residual `r = b − A x` recomputed by `exact` (summed exactly: not swamped
@@ -245,6 +253,13 @@ pub type Correct<'a> = &'a mut dyn FnMut(&mut [f64], f64, &mut [f64], usize) -> 
 /// no longer halves the measure (then accepted within [`STALL_ACCEPT`] of the target); a
 /// step whose true residual, already below `tol`, no longer halves either ends it with a
 /// measure up to [`FLOOR_ACCEPT`] accepted.
+/// Each inner solve reduces its residual by [`INNER_TOL`]. With `lean`, a step taken when
+/// the residual test is already met (only the rate tests are left) reduces it by
+/// `LEAN_MARGIN / measure` instead (at most [`LEAN_MAX`]; a step for which that is below
+/// `INNER_TOL` is a full one); the step after a lean one that did not end the refinement is
+/// a full one, and neither the stall nor the floor acceptance follows a lean step. For a solve that starts close to its answer (the
+/// reversed pressure from `1 − φ`), whose rate test asks for a factor of 10 to 1000 where
+/// a full step gives 10⁶.
 #[allow(clippy::too_many_arguments)]
 pub fn refined(
     exact: PartsResidual<'_>,
@@ -253,6 +268,7 @@ pub fn refined(
     b: &[f64],
     x: &mut [f64],
     mut lo: Option<&mut [f64]>,
+    lean: bool,
     tol: f64,
     max_iter: usize,
     work: &mut Work,
@@ -273,6 +289,7 @@ pub fn refined(
     let mut last = f64::INFINITY;
     let mut last_rel = f64::INFINITY;
     let mut step = 0;
+    let mut last_lean = false;
     loop {
         let t0 = Instant::now();
         // `lo` is zero until the first correction: the residual of `x` alone is the same,
@@ -312,14 +329,14 @@ pub fn refined(
         // At the round-off floor: the true residual no longer halves (it is the rounding
         // of `x` itself, which no correction removes) and the rate is within FLOOR_ACCEPT
         // of its target; further steps only trade the measure's round-off.
-        if step >= 2 && rel <= tol && rel > 0.5 * last_rel && m <= FLOOR_ACCEPT {
+        if step >= 2 && !last_lean && rel <= tol && rel > 0.5 * last_rel && m <= FLOOR_ACCEPT {
             return Ok(Outcome {
                 iterations: it,
                 residual: rel,
                 converged: true,
             });
         }
-        let stalled = step >= 2 && m > 0.5 * last && rel <= tol;
+        let stalled = step >= 2 && !last_lean && m > 0.5 * last && rel <= tol;
         if stalled || step >= REFINE_STEPS || it >= max_iter || !rel.is_finite() {
             return Ok(Outcome {
                 iterations: it,
@@ -330,7 +347,14 @@ pub fn refined(
         last = m;
         last_rel = rel;
         step += 1;
-        it += correct(r, r_norm, d, max_iter - it)?.iterations;
+        // Lean only where it asks for less than a full step.
+        last_lean = lean && !last_lean && rel <= tol && LEAN_MARGIN / m > INNER_TOL;
+        let rtol = if last_lean {
+            (LEAN_MARGIN / m).min(LEAN_MAX)
+        } else {
+            INNER_TOL
+        };
+        it += correct(r, r_norm, d, rtol, max_iter - it)?.iterations;
         match lo.as_deref_mut() {
             Some(lo) => add_split(d, x, lo),
             None => axpy(1.0, d, x),
@@ -349,4 +373,95 @@ fn add_split(d: &[f64], hi: &mut [f64], lo: &mut [f64]) {
                 (*h, *l) = two_sum(*h, *l + dv);
             }
         });
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::cell::RefCell;
+
+    /// [`refined`] on `diag(a) x = b` with an inner solve that reduces the residual by
+    /// `achieved(rtol)` exactly and the measure `‖r‖₂ / (1e-3 ‖b‖₂)` (residual test `tol = 1`,
+    /// met from the start): the relative tolerances the inner solves were asked for, whether
+    /// it converged, and the final measure.
+    fn run(lean: bool, achieved: fn(f64) -> f64, scale: f64) -> (Vec<f64>, bool, f64) {
+        let a = [1.0, 2.0, 4.0, 8.0];
+        let b = [1.0, 2.0, 3.0, 4.0];
+        let bnorm = dot(&b, &b).sqrt();
+        let exact = |parts: &[&[f64]], b: &[f64], r: &mut [f64]| {
+            for i in 0..b.len() {
+                let x: f64 = parts.iter().map(|p| p[i]).sum();
+                r[i] = b[i] - a[i] * x;
+            }
+        };
+        let asked = RefCell::new(Vec::new());
+        let mut correct = |r: &mut [f64], _: f64, d: &mut [f64], rtol: f64, _: usize| {
+            asked.borrow_mut().push(rtol);
+            let keep = achieved(rtol);
+            for i in 0..r.len() {
+                d[i] = (1.0 - keep) * r[i] / a[i];
+            }
+            Ok(Outcome {
+                iterations: 1,
+                residual: keep,
+                converged: true,
+            })
+        };
+        let measure = |_: &[f64], r: &[f64]| scale * dot(r, r).sqrt() / bnorm;
+        let mut x = vec![0.0; 4];
+        let mut work = Work::new(&mut ZeroedAhead::none(), 4);
+        let out = refined(
+            &exact,
+            &mut correct,
+            &measure,
+            &b,
+            &mut x,
+            None,
+            lean,
+            1.0,
+            100,
+            &mut work,
+        )
+        .unwrap();
+        let mut r = vec![0.0; 4];
+        exact(&[&x], &b, &mut r);
+        let asked = asked.into_inner();
+        (asked, out.converged, measure(&x, &r))
+    }
+
+    fn close(a: &[f64], b: &[f64]) -> bool {
+        a.len() == b.len() && a.iter().zip(b).all(|(x, y)| (x / y - 1.0).abs() < 1e-9)
+    }
+
+    /// A lean step asks for `LEAN_MARGIN / measure`: one step of 1e-4 for a measure of 1000
+    /// where a full step asks for `INNER_TOL`; both end below 1.
+    #[test]
+    fn a_lean_step_asks_for_what_the_measure_needs() {
+        let exact_solve = |rtol: f64| rtol;
+        let (asked, ok, m) = run(true, exact_solve, 1e3);
+        assert!(ok && m <= 1.0 && close(&asked, &[1e-4]), "{asked:?} {m:e}");
+        let (asked, ok, m) = run(false, exact_solve, 1e3);
+        assert!(
+            ok && m <= 1.0 && close(&asked, &[INNER_TOL]),
+            "{asked:?} {m:e}"
+        );
+    }
+
+    /// A lean step that falls short (its solve reaches only the square root of what was
+    /// asked) is followed by a full step, not by another lean one nor a stall; a measure
+    /// whose lean step would ask for less than `INNER_TOL` gets a full step first.
+    #[test]
+    fn a_short_lean_step_is_followed_by_a_full_one() {
+        let short = |rtol: f64| if rtol > INNER_TOL { rtol.sqrt() } else { rtol };
+        let (asked, ok, m) = run(true, short, 1e3);
+        assert!(
+            ok && m <= 1.0 && close(&asked, &[1e-4, INNER_TOL]),
+            "{asked:?} {m:e}"
+        );
+        let (asked, ok, m) = run(true, |rtol| rtol, 1e9);
+        assert!(
+            ok && m <= 1.0 && close(&asked, &[INNER_TOL, 1e-4]),
+            "{asked:?} {m:e}"
+        );
+    }
 }

@@ -315,8 +315,8 @@ pub(super) fn solve_multigrid(
     }
     let mut work = cg::Work::new(&mut ahead, n);
     let mut correction = Correction::new(mg, opts.should_stop, &mut ahead);
-    let mut correct = |r: &mut [f64], r_norm: f64, d: &mut [f64], max_iter: usize| {
-        correction.correct(r, r_norm, d, max_iter)
+    let mut correct = |r: &mut [f64], r_norm: f64, d: &mut [f64], rtol: f64, max_iter: usize| {
+        correction.correct(r, r_norm, d, rtol, max_iter)
     };
     let mut x = ahead.take(n);
     // φ carried as two doubles: `1 − φ` then keeps its digits where φ is near 1.
@@ -335,6 +335,7 @@ pub(super) fn solve_multigrid(
         &b_in,
         &mut x,
         Some(&mut lo),
+        false,
         opts.tol,
         max_iter,
         &mut work,
@@ -365,6 +366,7 @@ pub(super) fn solve_multigrid(
         &b_out,
         &mut psi,
         None,
+        true,
         opts.tol,
         max_iter,
         &mut work,
@@ -430,12 +432,14 @@ impl<'a> Correction<'a> {
         }
     }
 
-    /// `d ≈ A⁻¹ r` (`r` is overwritten without a reduction); `r_norm` is `‖r‖₂`.
+    /// `d ≈ A⁻¹ r` to a relative residual `rtol` (`r` is overwritten without a
+    /// reduction); `r_norm` is `‖r‖₂`.
     fn correct(
         &mut self,
         r: &mut [f64],
         r_norm: f64,
         d: &mut [f64],
+        rtol: f64,
         max_iter: usize,
     ) -> Result<cg::Outcome> {
         let mg = self.mg;
@@ -446,7 +450,7 @@ impl<'a> Correction<'a> {
                 r,
                 r_norm,
                 d,
-                cg::INNER_TOL,
+                rtol,
                 max_iter,
                 self.should_stop,
                 &mut self.inner,
@@ -454,13 +458,9 @@ impl<'a> Correction<'a> {
         }
         mg.reduce(r, &mut self.s);
         // The fine residual after the correction is `(0, s − S δ_B)`: CG on `S` stops where
-        // that is `INNER_TOL` of the fine `r`, as CG on `A` would.
+        // that is `rtol` of the fine `r`, as CG on `A` would.
         let (rn, sn) = (r_norm, cg::dot(&self.s, &self.s).sqrt());
-        let tol = if sn > 0.0 {
-            cg::INNER_TOL * rn / sn
-        } else {
-            cg::INNER_TOL
-        };
+        let tol = if sn > 0.0 { rtol * rn / sn } else { rtol };
         let outcome = cg::pcg(
             &mut |v, y| mg.reduced_product(v, y),
             &mut |s, z| mg.cycle(s, z),
