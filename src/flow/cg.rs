@@ -227,7 +227,7 @@ const REFINE_STEPS: usize = 8;
 /// times the reduction the rate tests still ask for), at most [`LEAN_MAX`].
 pub const LEAN_MARGIN: f64 = 0.1;
 
-/// The least reduction a lean step asks for.
+/// The largest relative residual a lean step asks for (its least reduction).
 pub const LEAN_MAX: f64 = 0.1;
 
 /// The inner solve of [`refined`]: `correct(r, ‖r‖₂, δ, rtol, max_iter)` sets `δ` to an
@@ -256,10 +256,10 @@ pub type Correct<'a> =
 /// Each inner solve reduces its residual by [`INNER_TOL`]. With `lean`, a step taken when
 /// the residual test is already met (only the rate tests are left) reduces it by
 /// `LEAN_MARGIN / measure` instead (at most [`LEAN_MAX`]; a step for which that is below
-/// `INNER_TOL` is a full one); the step after a lean one that did not end the refinement is
-/// a full one, and neither the stall nor the floor acceptance follows a lean step. For a solve that starts close to its answer (the
-/// reversed pressure from `1 − φ`), whose rate test asks for a factor of 10 to 1000 where
-/// a full step gives 10⁶.
+/// `INNER_TOL` is a full one); the step after a lean one that did not end the refinement
+/// is a full one, and neither the stall nor the floor acceptance follows a lean step. For
+/// a solve that starts close to its answer (the reversed pressure from `1 − φ`), whose
+/// rate test asks for a factor of 10 to 1000 where a full step gives 10⁶.
 #[allow(clippy::too_many_arguments)]
 pub fn refined(
     exact: PartsResidual<'_>,
@@ -381,9 +381,9 @@ mod tests {
     use std::cell::RefCell;
 
     /// [`refined`] on `diag(a) x = b` with an inner solve that reduces the residual by
-    /// `achieved(rtol)` exactly and the measure `‖r‖₂ / (1e-3 ‖b‖₂)` (residual test `tol = 1`,
-    /// met from the start): the relative tolerances the inner solves were asked for, whether
-    /// it converged, and the final measure.
+    /// `achieved(rtol)` exactly and the measure `scale · ‖r‖₂ / ‖b‖₂` (residual test
+    /// `tol = 1`, met from the start): the relative tolerances the inner solves were asked
+    /// for, whether it converged, and the final measure.
     fn run(lean: bool, achieved: fn(f64) -> f64, scale: f64) -> (Vec<f64>, bool, f64) {
         let a = [1.0, 2.0, 4.0, 8.0];
         let b = [1.0, 2.0, 3.0, 4.0];
