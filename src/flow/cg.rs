@@ -214,7 +214,7 @@ pub fn pcg(
 }
 
 /// Relative residual each inner solve of [`refined`] reaches.
-pub const INNER_TOL: f64 = 1e-6;
+const INNER_TOL: f64 = 1e-6;
 
 /// A refinement step whose true residual is below `tol` but no longer halves is at the
 /// round-off floor of `x`: its measure is accepted up to this.
@@ -225,10 +225,10 @@ const REFINE_STEPS: usize = 8;
 
 /// A lean step of [`refined`] asks its inner solve for this fraction of `1/measure` (ten
 /// times the reduction the rate tests still ask for), at most [`LEAN_MAX`].
-pub const LEAN_MARGIN: f64 = 0.1;
+const LEAN_MARGIN: f64 = 0.1;
 
 /// The largest relative residual a lean step asks for (its least reduction).
-pub const LEAN_MAX: f64 = 0.1;
+const LEAN_MAX: f64 = 0.1;
 
 /// The inner solve of [`refined`]: `correct(r, ‖r‖₂, δ, rtol, max_iter)` sets `δ` to an
 /// approximate solution of `A δ = r` (preconditioned CG from 0 to a relative residual
@@ -348,9 +348,10 @@ pub fn refined(
         last_rel = rel;
         step += 1;
         // Lean only where it asks for less than a full step.
-        last_lean = lean && !last_lean && rel <= tol && LEAN_MARGIN / m > INNER_TOL;
+        let lean_rtol = LEAN_MARGIN / m;
+        last_lean = lean && !last_lean && rel <= tol && lean_rtol > INNER_TOL;
         let rtol = if last_lean {
-            (LEAN_MARGIN / m).min(LEAN_MAX)
+            lean_rtol.min(LEAN_MAX)
         } else {
             INNER_TOL
         };
