@@ -42,23 +42,26 @@ pub(super) fn split(g: &impl Rows, wmax: &[f64]) -> (Vec<u32>, usize) {
 
 /// [`split`] with blocks of `block` unknowns.
 pub(super) fn split_in_blocks(g: &impl Rows, wmax: &[f64], block: usize) -> (Vec<u32>, usize) {
-    split_with(g, wmax, block, true)
+    split_with(g, wmax, block, true, NEAR_CAP)
 }
 
 /// [`split_in_blocks`]; `sift`: the second pass visits only the F unknowns left uncovered
-/// by the first (else every F unknown: the same split, tested).
+/// by the first (else every F unknown: the same split, tested); `near_cap`: neighbours a
+/// row's record holds in the first pass, at most [`NEAR_CAP`] (fewer, down to 0, read more
+/// rows from the operator: the same split, tested).
 pub(super) fn split_with(
     g: &impl Rows,
     wmax: &[f64],
     block: usize,
     sift: bool,
+    near_cap: usize,
 ) -> (Vec<u32>, usize) {
     let n = g.n();
     let mut state = vec![UNDECIDED; n];
     state
         .par_chunks_mut(block)
         .enumerate()
-        .for_each(|(b, st)| first_pass(g, wmax, b * block, st));
+        .for_each(|(b, st)| first_pass(g, wmax, b * block, st, near_cap));
     // Second pass: a strong F neighbour `k` of an F unknown `i` that is joined to none of
     // the strong C neighbours of `i` becomes C (else the interpolation to `i` would have to
     // lump `w_ik` into its diagonal). Inside each block in unknown order, other blocks'
@@ -160,22 +163,143 @@ impl Buckets {
     }
 }
 
+/// Neighbours a [`Near`] record holds.
+pub(super) const NEAR_CAP: usize = 12;
+
+/// [`Near::len`] of a row that does not fit a record (more than [`NEAR_CAP`] neighbours in
+/// the block, or one farther than an `i16` offset): read from the operator instead.
+const LONG: u8 = u8::MAX;
+
+/// One unknown's strong relations inside its block for the first pass, in one 32-byte
+/// record: its neighbours as offsets from it, in the row's order, each flagged as depending
+/// strongly on it (`dep`: `w_ij ≥ θ max_k w_jk`) and as influencing it strongly (`infl`:
+/// `w_ij ≥ θ max_k w_ik`). The first pass visits rows in the order the greedy choice
+/// dictates, far apart in memory: each visit of a compressed row cost cache misses on its
+/// row pointer, columns, weights and the neighbours' largest faces, where a record is 32
+/// aligned bytes, within one cache line.
+#[derive(Clone, Copy, Default)]
+#[repr(C, align(32))]
+struct Near {
+    len: u8,
+    dep: u16,
+    infl: u16,
+    off: [i16; NEAR_CAP],
+}
+
+/// The strong relations of the first pass: records, and the operator for the long rows.
+struct Strong<'a, G: Rows> {
+    g: &'a G,
+    wmax: &'a [f64],
+    i0: usize,
+    near: Vec<Near>,
+}
+
+impl<'a, G: Rows> Strong<'a, G> {
+    /// Records of the unknowns `i0..i0 + n`, each of at most `cap` (≤ [`NEAR_CAP`])
+    /// neighbours.
+    fn new(g: &'a G, wmax: &'a [f64], i0: usize, n: usize, cap: usize) -> Self {
+        let cap = cap.min(NEAR_CAP);
+        let near = (0..n)
+            .into_par_iter()
+            .with_min_len(CHUNK)
+            .map(|t| {
+                let i = i0 + t;
+                let mut r = Near::default();
+                let mut e = 0;
+                for (j, w) in g.row(i) {
+                    if (j as usize).wrapping_sub(i0) >= n {
+                        continue;
+                    }
+                    let d = j as i64 - i as i64;
+                    if e == cap || d < i16::MIN as i64 || d > i16::MAX as i64 {
+                        return Near {
+                            len: LONG,
+                            ..Near::default()
+                        };
+                    }
+                    r.off[e] = d as i16;
+                    if strong(w, wmax[j as usize]) {
+                        r.dep |= 1 << e;
+                    }
+                    if strong(w, wmax[i]) {
+                        r.infl |= 1 << e;
+                    }
+                    e += 1;
+                }
+                r.len = e as u8;
+                r
+            })
+            .collect();
+        Strong { g, wmax, i0, near }
+    }
+
+    /// The unknowns (block indices) that depend strongly on `t` (`dep`) or that `t` depends
+    /// on strongly, in the row's order, into `out`.
+    #[inline(always)]
+    fn list(&self, t: usize, dep: bool, out: &mut Vec<u32>) {
+        out.clear();
+        let r = &self.near[t];
+        if r.len != LONG {
+            let mut m = if dep { r.dep } else { r.infl };
+            while m != 0 {
+                let e = m.trailing_zeros() as usize;
+                m &= m - 1;
+                out.push((t as i64 + i64::from(r.off[e])) as u32);
+            }
+            return;
+        }
+        let (i0, n, i) = (self.i0, self.near.len(), self.i0 + t);
+        for (j, w) in self.g.row(i) {
+            if (j as usize).wrapping_sub(i0) >= n {
+                continue;
+            }
+            let by = if dep {
+                self.wmax[j as usize]
+            } else {
+                self.wmax[i]
+            };
+            if strong(w, by) {
+                out.push(j - i0 as u32);
+            }
+        }
+    }
+
+    /// How many unknowns of the block depend strongly on `t`.
+    fn dependents(&self, t: usize, buf: &mut Vec<u32>) -> u32 {
+        let r = &self.near[t];
+        if r.len != LONG {
+            return r.dep.count_ones();
+        }
+        self.list(t, true, buf);
+        buf.len() as u32
+    }
+}
+
+/// Asks for `v[i]`'s cache line ahead of its use (a hint only: no effect on any value).
+#[inline(always)]
+fn prefetch<T>(v: &[T], i: usize) {
+    #[cfg(target_arch = "x86_64")]
+    // SAFETY: a prefetch of any address is only a hint; it neither faults nor reads.
+    unsafe {
+        use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
+        _mm_prefetch::<_MM_HINT_T0>(v.as_ptr().wrapping_add(i).cast());
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = (v, i);
+}
+
 /// Ruge–Stüben first pass on the unknowns `i0..i0 + state.len()` and the strong faces
 /// between them, sequential in unknown order: repeatedly the undecided unknown on which
 /// most undecided ones depend strongly becomes C and its strong dependents F.
-fn first_pass(g: &impl Rows, wmax: &[f64], i0: usize, state: &mut [u8]) {
+fn first_pass(g: &impl Rows, wmax: &[f64], i0: usize, state: &mut [u8], near_cap: usize) {
     let n = state.len();
-    let inside = |j: u32| (j as usize).wrapping_sub(i0) < n;
+    let sr = Strong::new(g, wmax, i0, n, near_cap);
     // λ_i: unknowns of the block that depend strongly on i (i strongly influences j:
     // w_ji ≥ θ max_k w_jk; w_ji = w_ij, symmetric).
     let lambda: Vec<u32> = (0..n)
         .into_par_iter()
         .with_min_len(CHUNK)
-        .map(|t| {
-            g.row(i0 + t)
-                .filter(|&(j, w)| inside(j) && strong(w, wmax[j as usize]))
-                .count() as u32
-        })
+        .map_init(Vec::new, |buf, t| sr.dependents(t, buf))
         .collect();
     let top0 = lambda.iter().copied().max().unwrap_or(0) as usize;
     let mut b = Buckets {
@@ -194,6 +318,7 @@ fn first_pass(g: &impl Rows, wmax: &[f64], i0: usize, state: &mut [u8]) {
         b.push(i, lambda[i] as usize);
     }
     drop(lambda);
+    let (mut deps, mut infl) = (Vec::new(), Vec::new());
     let mut top = top0;
     loop {
         while top > 0 && b.head[top] == NONE {
@@ -207,37 +332,42 @@ fn first_pass(g: &impl Rows, wmax: &[f64], i0: usize, state: &mut [u8]) {
         b.unlink(i);
         state[i] = C;
         // Strong dependents of i become F; their strong influencers gain weight.
-        for (j, wij) in g.row(i0 + i) {
-            if !inside(j) {
-                continue;
-            }
-            let j = j as usize - i0;
-            if state[j] != UNDECIDED || !strong(wij, wmax[i0 + j]) {
+        sr.list(i, true, &mut deps);
+        for &j in &deps {
+            prefetch(&sr.near, j as usize);
+            prefetch(&b.node, j as usize);
+        }
+        for &j in &deps {
+            let j = j as usize;
+            if state[j] != UNDECIDED {
                 continue;
             }
             b.unlink(j);
             state[j] = F;
-            for (k, wjk) in g.row(i0 + j) {
-                if !inside(k) {
-                    continue;
-                }
-                let k = k as usize - i0;
-                if state[k] != UNDECIDED || !strong(wjk, wmax[i0 + j]) {
+            sr.list(j, false, &mut infl);
+            for &k in &infl {
+                prefetch(&b.node, k as usize);
+            }
+            for &k in &infl {
+                let k = k as usize;
+                if state[k] != UNDECIDED {
                     continue;
                 }
                 let l = b.node[k].lambda as usize + 1;
                 b.unlink(k);
                 b.push(k, l);
+                if l >= top {
+                    // Likely the next C unknown: its record is read first thing then.
+                    prefetch(&sr.near, k);
+                }
                 top = top.max(l);
             }
         }
         // Unknowns that strongly influence i lose weight.
-        for (k, wik) in g.row(i0 + i) {
-            if !inside(k) {
-                continue;
-            }
-            let k = k as usize - i0;
-            if state[k] != UNDECIDED || !strong(wik, wmax[i0 + i]) {
+        sr.list(i, false, &mut infl);
+        for &k in &infl {
+            let k = k as usize;
+            if state[k] != UNDECIDED {
                 continue;
             }
             let l = b.node[k].lambda as usize;

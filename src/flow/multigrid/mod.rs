@@ -123,7 +123,7 @@ use super::cg::{profiling, secs, CHUNK};
 use crate::alloc::{zeroed_now, ZeroedAhead};
 use coarsen::{split, strong, strongest};
 #[cfg(test)]
-use coarsen::{split_in_blocks, split_with, SPLIT_BLOCK};
+use coarsen::{split_in_blocks, split_with, NEAR_CAP, SPLIT_BLOCK};
 use coarsest::DenseCholesky;
 use cycle::{level_cycle, Fine, SharedMut};
 use galerkin::galerkin;

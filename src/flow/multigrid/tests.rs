@@ -32,7 +32,7 @@ fn every_strong_f_pair_shares_a_c_neighbour() {
                 let (cidx, nc) = split_in_blocks(&g, &wmax, block);
                 assert_eq!(
                     (cidx.clone(), nc),
-                    split_with(&g, &wmax, block, false),
+                    split_with(&g, &wmax, block, false, NEAR_CAP),
                     "sifted and full second pass differ ({ny} × {nx}, seed {seed}, blocks of \
                      {block})"
                 );
@@ -201,6 +201,44 @@ fn multigrid_memory_estimate_is_honest() {
             bytes as f64 / m as f64,
             mg.complexity()
         );
+    }
+}
+
+/// The first pass from its records (each holding up to `cap` neighbours) against the rows
+/// read from the operator alone (capacity 0), on one block and on blocks of 97 unknowns.
+fn assert_records_split_as_rows(g: &impl Rows, what: &str) {
+    let wmax = strongest(g);
+    for block in [SPLIT_BLOCK, 97] {
+        let rows = split_with(g, &wmax, block, true, 0);
+        assert!(rows.1 > 0, "{what}: some C unknowns");
+        for cap in [1, 3, NEAR_CAP] {
+            assert_eq!(
+                split_with(g, &wmax, block, true, cap),
+                rows,
+                "{what}: records of {cap} neighbours split otherwise (blocks of {block})"
+            );
+        }
+    }
+}
+
+#[test]
+fn the_first_pass_splits_the_same_from_records_as_from_rows() {
+    // The finest level (four faces a row) and the compressed levels below it (longer rows:
+    // with small capacities most rows are read from the operator, some from records).
+    for seed in 0..3 {
+        let st = holed(seed, 90, 80, true, 0.3);
+        let (cells, index) = unknowns(&st);
+        let fine = Fine {
+            st: &st,
+            cells: &cells,
+            index: &index,
+        };
+        assert_records_split_as_rows(&fine, &format!("finest level, seed {seed}"));
+        let mg = Multigrid::new(st.clone());
+        assert!(mg.levels.len() >= 3, "a hierarchy of several levels");
+        for (l, g) in mg.levels[..mg.levels.len() - 1].iter().enumerate() {
+            assert_records_split_as_rows(g, &format!("level {l}, seed {seed}"));
+        }
     }
 }
 
