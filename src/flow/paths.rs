@@ -401,8 +401,9 @@ pub(super) fn multigrid_vectors(n: usize, m: usize) -> Vec<usize> {
 
 /// The refinement's inner solve on the multigrid: `A δ = r` reduced to the Schur complement
 /// `S` of the red unknowns (`S δ_B = s`, [`Multigrid::reduce`]), solved there by CG
-/// preconditioned with one multigrid cycle on `S`, with `S` applied in double precision from the
-/// stencil, then `δ_R` from `δ_B` ([`Multigrid::extend`]). The same Krylov method as CG on
+/// preconditioned with one multigrid cycle on `S`, with `S` applied from its stored faces
+/// where they are faithful ([`Multigrid::inner_reduced_product`]), then `δ_R` from `δ_B`
+/// ([`Multigrid::extend`]). The same Krylov method as CG on
 /// `A` with the block preconditioner `L⁻ᵀ diag(D_R⁻¹, M_S) L⁻¹` (docs/flow.md), without
 /// the red half in its vectors and products. Without a reduction (the finest level is the
 /// coarsest), CG on `A` with the dense factor.
@@ -462,7 +463,7 @@ impl<'a> Correction<'a> {
         let (rn, sn) = (r_norm, cg::dot(&self.s, &self.s).sqrt());
         let tol = if sn > 0.0 { rtol * rn / sn } else { rtol };
         let outcome = cg::pcg(
-            &mut |v, y| mg.reduced_product(v, y),
+            &mut |v, y| mg.inner_reduced_product(v, y),
             &mut |s, z| mg.cycle(s, z),
             &mut self.s,
             sn,

@@ -30,6 +30,8 @@
 //! A wrapped grid with an odd number of columns joins column `nx − 1` to column 0, both of
 //! the same parity: its last column is kept whole (black), so the red cells stay independent.
 
+use std::sync::atomic::{AtomicBool, Ordering};
+
 use rayon::prelude::*;
 
 use super::cycle::Fine;
@@ -53,6 +55,9 @@ pub(super) struct Reduction {
     /// Of each grid cell: its unknown's `slot` ([`NONE`] without an unknown), so that
     /// [`Reduction::schur_product`] reaches a neighbour's entry in one lookup, not two.
     cell_slot: Vec<u32>,
+    /// Whether every face of the stored `S` is a normal single-precision number (none
+    /// dropped or subnormal), set by [`Reduction::schur`].
+    faithful: bool,
 }
 
 /// Whether grid cell `k` of a `· × nx` grid is red.
@@ -96,6 +101,7 @@ impl Reduction {
             reds,
             slot,
             cell_slot,
+            faithful: false,
         }
     }
 
@@ -116,8 +122,10 @@ impl Reduction {
     }
 
     /// The Schur complement `S` on the kept unknowns, in conductance form (module docs).
-    pub(super) fn schur(&self, top: &Fine<'_>) -> Graph {
+    pub(super) fn schur(&mut self, top: &Fine<'_>) -> Graph {
         let ns = self.kept.len();
+        // Cleared by any face that single precision stores coarsely (subnormal) or not at all.
+        let faithful = AtomicBool::new(true);
         let blocks: Vec<RowBlock> = (0..ns.div_ceil(CHUNK))
             .into_par_iter()
             .map(|blk| {
@@ -161,6 +169,9 @@ impl Reduction {
                             }
                         });
                     });
+                    if acc.iter().any(|e| !(e.1 as f32).is_normal()) {
+                        faithful.store(false, Ordering::Relaxed);
+                    }
                     // Stored in single precision: a face that rounds to 0 is dropped.
                     acc.retain(|e| e.1 as f32 != 0.0);
                     acc.sort_unstable_by_key(|e| e.0);
@@ -175,7 +186,14 @@ impl Reduction {
             })
             .collect();
         let (ptr, col, w, dir) = concat(blocks);
+        self.faithful = faithful.into_inner();
         Graph::from_faces(ptr, col, w, dir)
+    }
+
+    /// Whether every face of the stored `S` is a normal single-precision number, so within
+    /// 2^-24 of the exact face ([`Reduction::schur`]).
+    pub(super) fn faithful(&self) -> bool {
+        self.faithful
     }
 
     /// `s = r_B + W_BR D_R⁻¹ r_R` on the kept unknowns.

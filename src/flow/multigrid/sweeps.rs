@@ -47,6 +47,29 @@ impl Graph {
         });
     }
 
+    /// `y = A x` from the stored faces.
+    pub(super) fn product(&self, x: &[f64], y: &mut [f64]) {
+        with_columns!(self, cols => self.product_with(cols, x, y));
+    }
+
+    fn product_with(&self, cols: &impl Columns, x: &[f64], y: &mut [f64]) {
+        self.check_vectors(&[x, &*y]);
+        y.par_chunks_mut(CHUNK).enumerate().for_each(|(blk, yc)| {
+            let i0 = blk * CHUNK;
+            for (t, yv) in yc.iter_mut().enumerate() {
+                let i = i0 + t;
+                // SAFETY: as in `residual`.
+                unsafe {
+                    let mut v = 0.0;
+                    for p in *self.ptr.get_unchecked(i)..*self.ptr.get_unchecked(i + 1) {
+                        v += f64::from(*self.w.get_unchecked(p)) * x.get_unchecked(cols.at(p, i));
+                    }
+                    *yv = self.d.get_unchecked(i) * x.get_unchecked(i) - v;
+                }
+            }
+        });
+    }
+
     /// What the unchecked loops rely on beyond `check_rows`: stored rows (not a level
     /// applied from the stencil) and vectors of the level's size.
     pub(super) fn check_vectors(&self, vs: &[&[f64]]) {

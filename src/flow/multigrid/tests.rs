@@ -311,8 +311,9 @@ fn red_unknowns_are_independent_and_their_schur_complement_is_exact() {
             cells: &cells,
             index: &index,
         };
-        let red = Reduction::new(&top);
+        let mut red = Reduction::new(&top);
         let n = top.n();
+        let s = red.schur(&top);
         let is_red = |i: usize| red.is_red(i);
         for i in (0..n).filter(|&i| is_red(i)) {
             for (j, _) in top.row(i) {
@@ -323,7 +324,6 @@ fn red_unknowns_are_independent_and_their_schur_complement_is_exact() {
             }
         }
         let a = dense(&top);
-        let s = red.schur(&top);
         let got = dense(&s);
         let kept = &red.kept;
         for (p, &i) in kept.iter().enumerate() {
@@ -442,6 +442,54 @@ fn the_schur_product_is_s_times_v() {
             );
         }
     }
+}
+
+#[test]
+fn the_inner_product_is_the_stored_s_within_its_rounding() {
+    // Conductances over six decades: every face of S a normal single, so the inner solves'
+    // product is the stored S, within single precision's rounding of each face of the exact
+    // product (and not bit for bit the same: it is the stored one).
+    for (seed, ny, nx, periodic) in [(11, 60, 61, true), (12, 64, 50, false)] {
+        let st = holed(seed, ny, nx, periodic, 0.2);
+        let mg = Multigrid::new(st);
+        let red = mg.reduction.as_ref().expect("a reduction");
+        assert!(red.faithful(), "six decades are stored faithfully");
+        let s = &mg.levels[0];
+        let v: Vec<f64> = uniform(seed, s.n).iter().map(|u| u - 0.3).collect();
+        let (mut exact, mut inner) = (vec![0.0; s.n], vec![0.0; s.n]);
+        mg.reduced_product(&v, &mut exact);
+        mg.inner_reduced_product(&v, &mut inner);
+        assert_ne!(exact, inner, "the stored faces, not the stencil's");
+        for i in 0..s.n {
+            // Each face within 2^-24 of the exact one, the diagonal a sum of them.
+            let scale: f64 =
+                s.d[i] * v[i].abs() + s.row(i).map(|(j, w)| w * v[j as usize].abs()).sum::<f64>();
+            assert!(
+                (inner[i] - exact[i]).abs() <= 2f64.powi(-22) * scale,
+                "(S v)[{i}]: stored {} against exact {} ({ny} × {nx})",
+                inner[i],
+                exact[i]
+            );
+        }
+    }
+}
+
+#[test]
+fn a_face_below_single_precision_makes_the_inner_product_exact() {
+    // One cell 1e-50 times narrower in conductance than the rest: its faces in S round
+    // to 0 in single precision, so the inner solves apply S from the stencil.
+    let (ny, nx) = (40, 36);
+    let mut c: Vec<f64> = uniform(21, ny * nx).iter().map(|u| 0.5 + u).collect();
+    c[20 * nx + 17] = 1e-50;
+    let st = fine_stencil(&c, ny, nx, true).0;
+    let mg = Multigrid::new(st);
+    assert!(!mg.reduction.as_ref().expect("a reduction").faithful());
+    let n = mg.levels[0].n;
+    let v: Vec<f64> = uniform(22, n).iter().map(|u| u - 0.3).collect();
+    let (mut exact, mut inner) = (vec![0.0; n], vec![0.0; n]);
+    mg.reduced_product(&v, &mut exact);
+    mg.inner_reduced_product(&v, &mut inner);
+    assert_eq!(exact, inner);
 }
 
 /// The ℓ1 hybrid Gauss–Seidel sweep by its definition (module docs), in plain arithmetic:
