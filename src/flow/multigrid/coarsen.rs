@@ -166,10 +166,6 @@ impl Buckets {
 /// Neighbours a [`Near`] record holds.
 pub(super) const NEAR_CAP: usize = 12;
 
-/// [`Near::len`] of a row that does not fit a record (more than [`NEAR_CAP`] neighbours in
-/// the block, or one farther than an `i16` offset): read from the operator instead.
-const LONG: u8 = u8::MAX;
-
 /// One unknown's strong relations inside its block for the first pass, in one 32-byte
 /// record: its neighbours as offsets from it, in the row's order, each flagged as depending
 /// strongly on it (`dep`: `w_ij ≥ θ max_k w_jk`) and as influencing it strongly (`infl`:
@@ -180,7 +176,9 @@ const LONG: u8 = u8::MAX;
 #[derive(Clone, Copy, Default)]
 #[repr(C, align(32))]
 struct Near {
-    len: u8,
+    /// The row does not fit a record (more than [`NEAR_CAP`] neighbours in the block, or
+    /// one farther than an `i16` offset): it is read from the operator instead.
+    long: bool,
     dep: u16,
     infl: u16,
     off: [i16; NEAR_CAP],
@@ -213,7 +211,7 @@ impl<'a, G: Rows> Strong<'a, G> {
                     let d = j as i64 - i as i64;
                     if e == cap || d < i16::MIN as i64 || d > i16::MAX as i64 {
                         return Near {
-                            len: LONG,
+                            long: true,
                             ..Near::default()
                         };
                     }
@@ -226,7 +224,6 @@ impl<'a, G: Rows> Strong<'a, G> {
                     }
                     e += 1;
                 }
-                r.len = e as u8;
                 r
             })
             .collect();
@@ -239,7 +236,7 @@ impl<'a, G: Rows> Strong<'a, G> {
     fn list(&self, t: usize, dep: bool, out: &mut Vec<u32>) {
         out.clear();
         let r = &self.near[t];
-        if r.len != LONG {
+        if !r.long {
             let mut m = if dep { r.dep } else { r.infl };
             while m != 0 {
                 let e = m.trailing_zeros() as usize;
@@ -267,7 +264,7 @@ impl<'a, G: Rows> Strong<'a, G> {
     /// How many unknowns of the block depend strongly on `t`.
     fn dependents(&self, t: usize, buf: &mut Vec<u32>) -> u32 {
         let r = &self.near[t];
-        if r.len != LONG {
+        if !r.long {
             return r.dep.count_ones();
         }
         self.list(t, true, buf);
