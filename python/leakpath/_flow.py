@@ -86,7 +86,9 @@ class Flow:
         iterations: conjugate-gradient iterations (0 for the Cholesky solve).
         solver: the linear solver that ran: ``"cholesky"``, ``"multigrid"``, or ``"none"``
             when nothing spans.
-        n_unknowns: cells carrying an unknown pressure (those of the spanning clusters).
+        n_unknowns: cells carrying an unknown pressure: those of the spanning clusters'
+            backbone (the dead ends, which meet the flow at one cell only, take that
+            cell's pressure; docs/flow.md, "Dead ends").
         axis, viscosity, pressure_drop, periodic, dx: the inputs.
         seconds: wall time of the solve.
         gas: True for the isothermal ideal gas (``gas=True``); then ``mass_flow_rate`` is
@@ -317,7 +319,8 @@ def flow(
             preconditioned by classical algebraic multigrid, refined on exact residuals
             until the residual, the rate's error and the Jacobi pressure change are below
             ``tol``; memory linear in the grid), or ``"auto"`` (default: the multigrid from
-            2^22 unknowns (4097²-class gaps, where it is the faster); below, Cholesky whenever
+            2^22 unknowns (4097²-class gaps, where it is the faster), and there Cholesky
+            when the multigrid refuses the gap and the factor fits; below, Cholesky whenever
             its factor, whose exact size is known after the symbolic analysis, fits in
             ``memory_limit`` and the available memory, skipping the analysis when even a
             lower bound of the factor (320 bytes per unknown) does not fit; multigrid

@@ -22,13 +22,16 @@ pub(super) struct UnitSolution {
     pub(super) solver: &'static str,
 }
 
-/// Whether `Auto` takes the multigrid without trying the factor: from [`MULTIGRID_FROM`]
-/// unknowns, or when even the factor's lower bound does not fit in `room` bytes (its symbolic
-/// analysis, itself costly on large grids, is then skipped).
-pub(super) fn auto_skips_factor(n_unknowns: usize, room: Option<u64>) -> bool {
-    n_unknowns >= MULTIGRID_FROM
-        || room.is_some_and(|r| 16 * factor_entries_lower_bound(n_unknowns) > r)
+/// Whether `Auto` takes the multigrid without trying the factor: from `from` unknowns
+/// ([`Options::multigrid_from`]), or when even the factor's lower bound does not fit in
+/// `room` bytes (its symbolic analysis, itself costly on large grids, is then skipped).
+pub(super) fn auto_skips_factor(n_unknowns: usize, from: usize, room: Option<u64>) -> bool {
+    n_unknowns >= from || room.is_some_and(|r| 16 * factor_entries_lower_bound(n_unknowns) > r)
 }
+
+/// The class of a dead-end cell of a spanning cluster (beside 1 inlet only, 2 outlet only,
+/// 3 spanning).
+const DEAD_END: u8 = 4;
 
 /// φ or ψ read by grid cell: stored by cell (the factored paths), or by unknown with each
 /// cell's unknown (the multigrid's answer, not scattered to a cell-sized vector first).
@@ -115,8 +118,20 @@ pub(super) fn solve_axis0(
             }
         });
     // Each cell's reservoirs (the touch flags of its cluster), in place of its label.
-    let class: Vec<u8> = labels.par_iter().map(|&l| touch[l as usize]).collect();
+    let mut class: Vec<u8> = labels.par_iter().map(|&l| touch[l as usize]).collect();
     drop(labels);
+    // The dead ends of the spanning clusters carry no flow and sit at their anchors'
+    // pressures (`dead_ends`): no unknowns there, their conductances closed.
+    let dead = if n <= dead_ends::MAX_CELLS && touch.contains(&3) {
+        let spanning: Vec<bool> = class.par_iter().map(|&t| t == 3).collect();
+        dead_ends::anchors(&spanning, ny, nx, periodic)
+    } else {
+        Vec::new()
+    };
+    for &(k, _) in &dead {
+        class[k as usize] = DEAD_END;
+        c[k as usize] = 0.0;
+    }
     let n_unknowns = class.par_iter().filter(|&&t| t == 3).count();
 
     let (fine, mut rhs) = fine_stencil(&c, ny, nx, periodic);
@@ -151,89 +166,15 @@ pub(super) fn solve_axis0(
             (None, None) => None,
         }
     };
-    // `Some(Ok)`: a factor; `Some(Err)`: the factor broke down (a non-positive pivot of the
-    // rounded matrix); `None`: no factor (multigrid, or too large for `Auto`).
-    let hopeless = opts.solver == Solver::Auto && auto_skips_factor(n_unknowns, factor_room);
-    let factor = if n_unknowns == 0 || opts.solver == Solver::Multigrid || hopeless {
-        None
-    } else {
-        let kept = opts.analysis.filter(|k| k.applies(n));
-        let prior = kept.and_then(|k| k.get());
-        // A kept analysis carries the fill of an earlier level's larger set of unknowns: when
-        // that does not fit, this level's own (smaller) analysis may.
-        let made = match direct::Factor::new_reusing(&fine, factor_room, prior.as_ref()) {
-            Err(Error::TooLarge { .. }) if prior.is_some() => {
-                direct::Factor::new_reusing(&fine, factor_room, None)
-            }
-            made => made,
-        };
-        match made {
-            Ok(f) => {
-                if let Some(k) = kept {
-                    k.keep(f.analysis(), f.reused());
-                }
-                Some(Ok(f))
-            }
-            Err(Error::TooLarge { .. }) if opts.solver == Solver::Auto => None,
-            Err(e @ Error::NotConverged { .. }) => Some(Err(e)),
-            Err(e) => return Err(e),
-        }
-    };
+    let hopeless = opts.solver == Solver::Auto
+        && auto_skips_factor(n_unknowns, opts.multigrid_from, factor_room);
     // `lo`: the parts of φ and ψ below the last digit of `x` and `psi` (the elimination's
     // refinement; empty otherwise).
     let mut lo = (Vec::new(), Vec::new());
-    // The factor's answer when it passes its checks; else the cancellation-free elimination,
-    // or with `Auto` beyond the elimination's size the multigrid (`None`).
-    let direct_answer = match factor {
-        None => None,
-        Some(f) => {
-            let trust = paths::direct_trust(opts.tol);
-            let trusted = f.ok().and_then(|mut f| {
-                let t0 = std::time::Instant::now();
-                let a = solve_direct(&mut f, &fine, &rhs, &b_out);
-                let t_solve = cg::secs(t0);
-                let t0 = std::time::Instant::now();
-                let ok = trusted(&rhs, &b_out, &a, trust);
-                if prof {
-                    let (_, (e_out, e_in)) = paths::rate_errors(&rhs, &b_out, &a);
-                    eprintln!(
-                        "flow: solve and residuals {t_solve:.3} s, checks {:.3} s ({}; rate \
-                         errors {e_out:.1e}, {e_in:.1e}, kept at {trust:.0e})",
-                        cg::secs(t0),
-                        if ok { "trusted" } else { "refining" }
-                    );
-                }
-                if ok {
-                    return Some(a);
-                }
-                let t0 = std::time::Instant::now();
-                let a = split_direct(&mut f, &fine, &rhs, &b_out, a, trust);
-                let ok = trusted(&rhs, &b_out, &a, trust);
-                if prof {
-                    let (_, (e_out, e_in)) = paths::rate_errors(&rhs, &b_out, &a);
-                    eprintln!(
-                        "flow: refinement in two doubles and checks {:.3} s ({}; rate errors \
-                         {e_out:.1e}, {e_in:.1e})",
-                        cg::secs(t0),
-                        if ok { "trusted" } else { "refused" }
-                    );
-                }
-                ok.then_some(a)
-            });
-            match trusted {
-                Some(a) => {
-                    let residual = a.residual();
-                    lo = a.lo;
-                    Some((a.x, a.psi, residual))
-                }
-                None if opts.solver == Solver::Auto && n_unknowns > gth::MAX_UNKNOWNS => None,
-                None => {
-                    let (x, psi, residual, split) = solve_gth(&fine, &rhs, &b_out, factor_room)?;
-                    lo = split;
-                    Some((x, psi, residual))
-                }
-            }
-        }
+    let direct_answer = if n_unknowns == 0 || opts.solver == Solver::Multigrid || hopeless {
+        None
+    } else {
+        factored(&fine, &rhs, &b_out, n_unknowns, opts, factor_room, &mut lo)?
     };
     // `index`: each cell's unknown when `x` and `psi` are by unknown (the multigrid's), else
     // empty (by cell).
@@ -265,25 +206,64 @@ pub(super) fn solve_axis0(
             mg.gather_row(&in_row, 0),
             mg.row_entries(&out_row, (ny - 1) * nx),
         );
-        let (x, psi, residual, it) = solve_multigrid(&mg, b_in, b_o, opts, max_iter, ahead)??;
-        iterations = it;
-        let (fine, index) = mg.into_fine_and_index();
-        (fine, x, psi, index, residual, "multigrid")
+        // `Auto` ran the multigrid first by size alone: when it refuses the gap, the factor
+        // if its lower bound fits.
+        let fallback = opts.solver == Solver::Auto
+            && n_unknowns >= opts.multigrid_from
+            && !auto_skips_factor(n_unknowns, usize::MAX, factor_room);
+        match solve_multigrid(&mg, b_in, b_o, opts, max_iter, ahead)? {
+            Ok((x, psi, residual, it)) => {
+                iterations = it;
+                let (fine, index) = mg.into_fine_and_index();
+                (fine, x, psi, index, residual, "multigrid")
+            }
+            Err(refusal @ Error::NotConverged { .. }) if fallback => {
+                levels = 0;
+                let (fine, _) = mg.into_fine_and_index();
+                let mut rhs = vec![0.0; n];
+                rhs[..nx].copy_from_slice(&in_row);
+                let mut b_out = vec![0.0; n];
+                b_out[(ny - 1) * nx..].copy_from_slice(&out_row);
+                match factored(&fine, &rhs, &b_out, n_unknowns, opts, factor_room, &mut lo) {
+                    Ok(Some((x, psi, residual))) => {
+                        (fine, x, psi, Vec::new(), residual, "cholesky")
+                    }
+                    // The factor did not fit or its answer failed its checks: the
+                    // multigrid's refusal says why the gap is out of reach.
+                    Ok(None) | Err(Error::TooLarge { .. } | Error::NotConverged { .. }) => {
+                        return Err(refusal)
+                    }
+                    Err(e) => return Err(e),
+                }
+            }
+            Err(e) => return Err(e),
+        }
     };
     let (x, psi) = (ByCell::new(x, &index), ByCell::new(psi, &index));
     drop((rhs, b_out));
     let t_post = std::time::Instant::now();
     let st = &st;
     // Pressures: solution on spanning cells, reservoir pressure on one-sided clusters.
+    let anchored = |k: usize| {
+        let at = dead.binary_search_by_key(&(k as u32), |&(c, _)| c);
+        match at.map(|i| dead[i].1) {
+            Ok(dead_ends::INLET) => 1.0,
+            Ok(dead_ends::OUTLET) => 0.0,
+            Ok(a) => x.at(a as usize),
+            Err(_) => f64::NAN,
+        }
+    };
     let phi: Vec<f64> = (0..n)
         .into_par_iter()
         .map(|k| match class[k] {
             3 => x.at(k),
             1 => 1.0,
             2 => 0.0,
+            DEAD_END => anchored(k),
             _ => f64::NAN,
         })
         .collect();
+    drop(dead);
     drop(class);
     // A face flux `c_f (φ1 − φ2)` loses the digits of `φ` near 1 (all of the inlet side near
     // the percolation threshold, where the flow is many decades below the conductances):
@@ -408,5 +388,95 @@ pub(super) fn solve_axis0(
         n_unknowns,
         levels,
         solver,
+    })
+}
+
+/// `φ`, `ψ` (by cell) and the relative residual of a factored answer.
+type Factored = (Vec<f64>, Vec<f64>, f64);
+
+/// The factored answer `(φ, ψ, residual)` on the cells of `fine` (by cell), its low parts in
+/// `lo` when it was refined in two doubles or eliminated without cancellation: the factor's
+/// answer when it passes its checks, else the cancellation-free elimination. `None` when
+/// `Auto` has no answer here: the factor does not fit, or its answer fails on more unknowns
+/// than the elimination takes (the caller then runs, or reports, the multigrid).
+fn factored(
+    fine: &assemble::Stencil,
+    rhs: &[f64],
+    b_out: &[f64],
+    n_unknowns: usize,
+    opts: &Options<'_>,
+    factor_room: Option<u64>,
+    lo: &mut (Vec<f64>, Vec<f64>),
+) -> Result<Option<Factored>> {
+    let n = fine.ny * fine.nx;
+    let prof = cg::profiling();
+    let kept = opts.analysis.filter(|k| k.applies(n));
+    let prior = kept.and_then(|k| k.get());
+    // A kept analysis carries the fill of an earlier level's larger set of unknowns: when
+    // that does not fit, this level's own (smaller) analysis may.
+    let made = match direct::Factor::new_reusing(fine, factor_room, prior.as_ref()) {
+        Err(Error::TooLarge { .. }) if prior.is_some() => {
+            direct::Factor::new_reusing(fine, factor_room, None)
+        }
+        made => made,
+    };
+    // `Ok`: a factor; `Err`: the factor broke down (a non-positive pivot of the rounded
+    // matrix).
+    let factor = match made {
+        Ok(f) => {
+            if let Some(k) = kept {
+                k.keep(f.analysis(), f.reused());
+            }
+            Ok(f)
+        }
+        Err(Error::TooLarge { .. }) if opts.solver == Solver::Auto => return Ok(None),
+        Err(e @ Error::NotConverged { .. }) => Err(e),
+        Err(e) => return Err(e),
+    };
+    let trust = paths::direct_trust(opts.tol);
+    let trusted = factor.ok().and_then(|mut f| {
+        let t0 = std::time::Instant::now();
+        let a = solve_direct(&mut f, fine, rhs, b_out);
+        let t_solve = cg::secs(t0);
+        let t0 = std::time::Instant::now();
+        let ok = trusted(rhs, b_out, &a, trust);
+        if prof {
+            let (_, (e_out, e_in)) = paths::rate_errors(rhs, b_out, &a);
+            eprintln!(
+                "flow: solve and residuals {t_solve:.3} s, checks {:.3} s ({}; rate \
+                 errors {e_out:.1e}, {e_in:.1e}, kept at {trust:.0e})",
+                cg::secs(t0),
+                if ok { "trusted" } else { "refining" }
+            );
+        }
+        if ok {
+            return Some(a);
+        }
+        let t0 = std::time::Instant::now();
+        let a = split_direct(&mut f, fine, rhs, b_out, a, trust);
+        let ok = trusted(rhs, b_out, &a, trust);
+        if prof {
+            let (_, (e_out, e_in)) = paths::rate_errors(rhs, b_out, &a);
+            eprintln!(
+                "flow: refinement in two doubles and checks {:.3} s ({}; rate errors \
+                 {e_out:.1e}, {e_in:.1e})",
+                cg::secs(t0),
+                if ok { "trusted" } else { "refused" }
+            );
+        }
+        ok.then_some(a)
+    });
+    Ok(match trusted {
+        Some(a) => {
+            let residual = a.residual();
+            *lo = a.lo;
+            Some((a.x, a.psi, residual))
+        }
+        None if opts.solver == Solver::Auto && n_unknowns > gth::MAX_UNKNOWNS => None,
+        None => {
+            let (x, psi, residual, split) = solve_gth(fine, rhs, b_out, factor_room)?;
+            *lo = split;
+            Some((x, psi, residual))
+        }
     })
 }

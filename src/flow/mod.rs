@@ -21,7 +21,9 @@
 //!
 //! A cell is *open* when it is free and its conductance is positive. Open cells are labelled
 //! with 4-connectivity (the percolation classes' connectivity, same wrap). Only clusters that
-//! touch both the inlet and the outlet row carry unknowns. A cluster touching only the inlet
+//! touch both the inlet and the outlet row carry unknowns, and of those only the backbone:
+//! a dead end, joined to the rest through one cell, takes that cell's pressure
+//! ([`dead_ends`]). A cluster touching only the inlet
 //! has `p = Δp` exactly, only the outlet `p = 0` exactly (no net flux either way); any other
 //! cluster is not joined to a reservoir and has no pressure (NaN). So `Q = 0` exactly when no
 //! cluster spans.
@@ -41,6 +43,7 @@ pub mod assemble;
 mod axis0;
 pub mod cg;
 mod compensated;
+pub mod dead_ends;
 pub mod direct;
 pub mod gth;
 mod halves;
@@ -105,9 +108,11 @@ pub struct Problem<'a> {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Solver {
     /// Cholesky when its factor fits in memory (the symbolic analysis skipped when even a
-    /// lower bound of it does not), multigrid otherwise, from [`MULTIGRID_FROM`] unknowns,
-    /// and when the factor's answer fails its checks on more unknowns than the
-    /// cancellation-free elimination takes.
+    /// lower bound of it does not), multigrid otherwise, and when the factor's answer fails
+    /// its checks on more unknowns than the cancellation-free elimination takes. From
+    /// [`MULTIGRID_FROM`] unknowns the multigrid first, and the factor when the multigrid
+    /// refuses the gap (a region joined through faces below its single-precision range)
+    /// and the factor fits.
     Auto,
     /// Sparse Cholesky ([`direct`]), refined with double-double residuals.
     Cholesky,
@@ -145,6 +150,9 @@ pub struct Options<'a> {
     /// An analysis kept from the previous flows of a sequence (a sweep's levels), used by
     /// the factor when it fits and replaced when not ([`kept`]).
     pub analysis: Option<&'a kept::KeptAnalysis>,
+    /// From this many unknowns [`Solver::Auto`] runs the multigrid first, and the factor
+    /// only when the multigrid refuses and the factor fits (default [`MULTIGRID_FROM`]).
+    pub multigrid_from: usize,
 }
 
 impl Default for Options<'_> {
@@ -156,6 +164,7 @@ impl Default for Options<'_> {
             memory_limit: None,
             should_stop: None,
             analysis: None,
+            multigrid_from: MULTIGRID_FROM,
         }
     }
 }

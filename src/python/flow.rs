@@ -214,6 +214,7 @@ pub(super) fn solve_reynolds_flow<'py>(
                 memory_limit,
                 should_stop: Some(&stop),
                 analysis: kept,
+                ..Options::default()
             };
             run_solve(&pool, ny * nx, || {
                 flow::solve_labelled(&problem, &opts, lab_slice)

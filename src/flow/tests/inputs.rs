@@ -73,12 +73,90 @@ fn auto_uses_the_multigrid_when_the_factor_does_not_fit() {
 fn auto_skips_the_factor_from_multigrid_from_unknowns() {
     // Ample room: the factor below the threshold, the multigrid from it.
     let ample = Some(u64::MAX / 2);
-    assert!(!axis0::auto_skips_factor(MULTIGRID_FROM - 1, ample));
-    assert!(!axis0::auto_skips_factor(MULTIGRID_FROM - 1, None));
-    assert!(axis0::auto_skips_factor(MULTIGRID_FROM, ample));
-    assert!(axis0::auto_skips_factor(MULTIGRID_FROM, None));
+    assert!(!axis0::auto_skips_factor(
+        MULTIGRID_FROM - 1,
+        MULTIGRID_FROM,
+        ample
+    ));
+    assert!(!axis0::auto_skips_factor(
+        MULTIGRID_FROM - 1,
+        MULTIGRID_FROM,
+        None
+    ));
+    assert!(axis0::auto_skips_factor(
+        MULTIGRID_FROM,
+        MULTIGRID_FROM,
+        ample
+    ));
+    assert!(axis0::auto_skips_factor(
+        MULTIGRID_FROM,
+        MULTIGRID_FROM,
+        None
+    ));
     // Few unknowns, but not even the factor's lower bound fits.
-    assert!(axis0::auto_skips_factor(1000, Some(1024)));
+    assert!(axis0::auto_skips_factor(1000, MULTIGRID_FROM, Some(1024)));
+}
+
+/// A gap of random widths in [0.5, 1) on an `n × n` wrapped grid with a walled 21 × 21
+/// pocket joined to the rest through two cells of gap `neck`, in its left and right walls
+/// (so that it is not a dead end); and the contact mask, with the necks closed too when
+/// `sealed`.
+fn pocket_gap(n: usize, neck: f64, sealed: bool) -> (Vec<f64>, Vec<bool>) {
+    let mut gap: Vec<f64> = lcg(21, n * n).iter().map(|&u| 0.5 + 0.5 * u).collect();
+    let mut contact = vec![false; n * n];
+    let (a, b) = (n / 3, n / 3 + 22);
+    for t in a..=b {
+        for k in [a * n + t, b * n + t, t * n + a, t * n + b] {
+            contact[k] = true;
+        }
+    }
+    let m = (a + b) / 2;
+    for k in [m * n + a, m * n + b] {
+        gap[k] = neck;
+        contact[k] = sealed;
+    }
+    (gap, contact)
+}
+
+/// `Auto` from its multigrid threshold runs the multigrid first; on a pocket joined through
+/// necks whose `g³` is below single precision the multigrid refuses, and `Auto` answers with
+/// the factor when it fits. The necks carry ~1e-60 of the flow: the rate is that of the gap
+/// with the pocket sealed, which the multigrid solves.
+#[test]
+fn auto_answers_with_the_factor_where_the_multigrid_refuses() {
+    let n = 97;
+    let (gap, contact) = pocket_gap(n, 1e-20, false);
+    let mut pr = problem(&gap, n, n, 0, true);
+    pr.contact = Some(&contact);
+    let refused = solve(&pr, &forced(Solver::Multigrid)).unwrap_err();
+    assert!(matches!(refused, Error::NotConverged { .. }), "{refused}");
+    let first = Options {
+        multigrid_from: 1,
+        ..Options::default()
+    };
+    let sol = solve(&pr, &first).unwrap();
+    assert_eq!(sol.solver, "cholesky");
+
+    let (gap_s, contact_s) = pocket_gap(n, 1e-20, true);
+    let mut sealed = problem(&gap_s, n, n, 0, true);
+    sealed.contact = Some(&contact_s);
+    let oracle = solve(&sealed, &forced(Solver::Multigrid)).unwrap();
+    assert_eq!(oracle.solver, "multigrid");
+    assert!(
+        rel(sol.flow_rate, oracle.flow_rate) < 1e-10,
+        "{} {}",
+        sol.flow_rate,
+        oracle.flow_rate
+    );
+    assert!(rel(sol.inlet_flow_rate, oracle.flow_rate) < 1e-10);
+    // Without room for the factor, the multigrid's refusal is the answer.
+    let tight = Options {
+        multigrid_from: 1,
+        memory_limit: Some(multigrid_estimate(n * n, n * n) + 1024),
+        ..Options::default()
+    };
+    let e = solve(&pr, &tight).unwrap_err();
+    assert!(matches!(e, Error::NotConverged { .. }), "{e}");
 }
 
 /// A solve handed the labels of its open cells gives the same bits as one that labels them

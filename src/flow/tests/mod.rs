@@ -2,6 +2,7 @@
 //! generators are here.
 use super::*;
 
+mod dead_ends;
 mod exact;
 mod inputs;
 mod ordering;
