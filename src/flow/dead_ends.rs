@@ -99,15 +99,18 @@ pub fn anchors(spanning: &[bool], ny: usize, nx: usize, periodic: bool) -> Vec<(
     let mut time = 0u32;
     // (vertex, next slot)
     let mut stack: Vec<(u32, u8)> = vec![(inlet as u32, 0)];
-    let mut reservoir_slot = 0usize;
+    let mut reservoir_slot = [0usize; 2];
     disc[inlet] = time;
     low[inlet] = time;
     time += 1;
     while let Some(&mut (u, ref mut s)) = stack.last_mut() {
         let u = u as usize;
-        // A reservoir's slots run past 255: it is at the bottom of the stack, its slot kept
-        // apart.
-        let at = if u >= n { reservoir_slot } else { *s as usize };
+        // A reservoir's slots run past 255: kept apart, one counter each.
+        let at = if u >= n {
+            reservoir_slot[u - n]
+        } else {
+            *s as usize
+        };
         match slot(u, at) {
             None => {
                 stack.pop();
@@ -119,7 +122,7 @@ pub fn anchors(spanning: &[bool], ny: usize, nx: usize, periodic: bool) -> Vec<(
             }
             Some(next) => {
                 if u >= n {
-                    reservoir_slot += 1;
+                    reservoir_slot[u - n] += 1;
                 } else {
                     *s += 1;
                 }
