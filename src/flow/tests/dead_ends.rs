@@ -24,30 +24,18 @@ fn reachable(
             next.push(if u == n { n + 1 } else { n });
             next.extend((0..nx).map(|j| row * nx + j).filter(|&k| spanning[k]));
         } else {
-            let (i, j) = (u / nx, u % nx);
+            let i = u / nx;
             if i == 0 {
                 next.push(n);
             }
             if i + 1 == ny {
                 next.push(n + 1);
             }
-            if i > 0 {
-                next.push(u - nx);
-            }
-            if i + 1 < ny {
-                next.push(u + nx);
-            }
-            if j > 0 {
-                next.push(u - 1);
-            } else if periodic && nx > 1 {
-                next.push(u + nx - 1);
-            }
-            if j + 1 < nx {
-                next.push(u + 1);
-            } else if periodic && nx > 1 {
-                next.push(u + 1 - nx);
-            }
-            next.retain(|&v| v >= n || spanning[v]);
+            next.extend(
+                grid_neighbours(u, ny, nx, periodic)
+                    .into_iter()
+                    .filter(|&v| spanning[v]),
+            );
         }
         for v in next {
             if v != removed && !seen[v] {

@@ -94,6 +94,30 @@ fn maze_gap(seed: u64, h: usize, w: usize, decades: f64) -> (Vec<f64>, usize, us
     (gap, ny, nx)
 }
 
+/// The edge neighbours of cell `k` on a row-major `ny × nx` grid (no wrap along axis 0;
+/// across axis 1 when `periodic`): above, below, left, right where they exist.
+fn grid_neighbours(k: usize, ny: usize, nx: usize, periodic: bool) -> Vec<usize> {
+    let (i, j) = (k / nx, k % nx);
+    let mut nbs = Vec::with_capacity(4);
+    if i > 0 {
+        nbs.push(k - nx);
+    }
+    if i + 1 < ny {
+        nbs.push(k + nx);
+    }
+    if j > 0 {
+        nbs.push(k - 1);
+    } else if periodic && nx > 1 {
+        nbs.push(k + nx - 1);
+    }
+    if j + 1 < nx {
+        nbs.push(k + 1);
+    } else if periodic && nx > 1 {
+        nbs.push(k + 1 - nx);
+    }
+    nbs
+}
+
 /// Open cells the way the solver defines them, 4-connectivity, no wrap: the cells of the one
 /// inlet-to-outlet path of a perfect maze (a plain breadth-first search from the inlet
 /// opening, then back along the parents from the outlet opening).
@@ -104,21 +128,7 @@ fn maze_path(gap: &[f64], ny: usize, nx: usize) -> Vec<usize> {
     parent[start] = start;
     let mut queue = std::collections::VecDeque::from([start]);
     while let Some(k) = queue.pop_front() {
-        let (i, j) = (k / nx, k % nx);
-        let mut nbs = Vec::new();
-        if i > 0 {
-            nbs.push(k - nx);
-        }
-        if i + 1 < ny {
-            nbs.push(k + nx);
-        }
-        if j > 0 {
-            nbs.push(k - 1);
-        }
-        if j + 1 < nx {
-            nbs.push(k + 1);
-        }
-        for l in nbs {
+        for l in grid_neighbours(k, ny, nx, false) {
             if gap[l] > 0.0 && parent[l] == usize::MAX {
                 parent[l] = k;
                 queue.push_back(l);

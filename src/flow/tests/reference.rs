@@ -64,25 +64,8 @@ fn dense_reference(
         }
     };
     for (r, &k) in idx.iter().enumerate() {
-        let (i, j) = (k / nx, k % nx);
-        let mut nbs = vec![];
-        if i > 0 {
-            nbs.push(k - nx);
-        }
-        if i + 1 < ny {
-            nbs.push(k + nx);
-        }
-        if j > 0 {
-            nbs.push(k - 1);
-        } else if periodic && nx > 1 {
-            nbs.push(k + nx - 1);
-        }
-        if j + 1 < nx {
-            nbs.push(k + 1);
-        } else if periodic && nx > 1 {
-            nbs.push(k + 1 - nx);
-        }
-        for q in nbs {
+        let i = k / nx;
+        for q in grid_neighbours(k, ny, nx, periodic) {
             let cf = h(c[k], c[q]);
             if cf > 0.0 {
                 a[(r, r)] += cf;
