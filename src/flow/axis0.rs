@@ -122,6 +122,7 @@ pub(super) fn solve_axis0(
     drop(labels);
     // The dead ends of the spanning clusters carry no flow and sit at their anchors'
     // pressures (`dead_ends`): no unknowns there, their conductances closed.
+    let t_dead = std::time::Instant::now();
     let dead = if n <= dead_ends::MAX_CELLS && touch.contains(&3) {
         let spanning: Vec<bool> = class.par_iter().map(|&t| t == 3).collect();
         dead_ends::anchors(&spanning, ny, nx, periodic)
@@ -133,6 +134,14 @@ pub(super) fn solve_axis0(
         c[k as usize] = 0.0;
     }
     let n_unknowns = class.par_iter().filter(|&&t| t == 3).count();
+    if cg::profiling() {
+        eprintln!(
+            "flow: dead ends {:.3} s ({} cells, {} unknowns)",
+            cg::secs(t_dead),
+            dead.len(),
+            n_unknowns
+        );
+    }
 
     let (fine, mut rhs) = fine_stencil(&c, ny, nx, periodic);
     // The outlet reservoir's share of the diagonal: `Q_out = b_out · φ`, and `ψ = 1 − φ` (the

@@ -15,6 +15,8 @@
 //!
 //! One depth-first search with low points (Hopcroft–Tarjan), iterative, in `O(cells)`.
 
+use rayon::prelude::*;
+
 /// A cell that is not a dead end (on the backbone, or not spanning).
 const NONE: u32 = u32::MAX;
 /// A dead end hanging off the inlet reservoir (pressure `Δp`).
@@ -26,131 +28,24 @@ pub const OUTLET: u32 = u32::MAX - 2;
 pub const MAX_CELLS: usize = (u32::MAX - 3) as usize;
 
 /// The dead-end cells with their anchors, `(cell, anchor)` by increasing cell (row-major
-/// indices): the backbone cell, [`INLET`] or [`OUTLET`] whose pressure the dead end takes. `spanning`: the cells of the spanning clusters on the row-major `ny × nx`
-/// grid, flow along axis 0 (inlet before row 0, outlet after row `ny − 1`), wrapped across
-/// axis 1 when `periodic`.
+/// indices): the backbone cell, [`INLET`] or [`OUTLET`] whose pressure the dead end takes.
+/// `spanning`: the cells of the spanning clusters on the row-major `ny × nx` grid, flow
+/// along axis 0 (inlet before row 0, outlet after row `ny − 1`), wrapped across axis 1 when
+/// `periodic`.
 pub fn anchors(spanning: &[bool], ny: usize, nx: usize, periodic: bool) -> Vec<(u32, u32)> {
     let n = ny * nx;
     assert!(n <= MAX_CELLS && spanning.len() == n);
-    let (inlet, outlet) = (n, n + 1);
-    // The neighbours of a vertex, one slot at a time: `Some(None)` an empty slot, `None` done.
-    let slot = |u: usize, s: usize| -> Option<Option<usize>> {
-        if u >= n {
-            // A reservoir: the other reservoir first, then its row's spanning cells.
-            let row = if u == inlet { 0 } else { ny - 1 };
-            return match s {
-                0 => Some(Some(if u == inlet { outlet } else { inlet })),
-                s if s <= nx => {
-                    let k = row * nx + s - 1;
-                    Some(spanning[k].then_some(k))
-                }
-                _ => None,
-            };
-        }
-        let (i, j) = (u / nx, u % nx);
-        let cell = |k: usize| Some(spanning[k].then_some(k));
-        match s {
-            0 => {
-                if i > 0 {
-                    cell(u - nx)
-                } else {
-                    Some(Some(inlet))
-                }
-            }
-            1 => {
-                if i + 1 < ny {
-                    cell(u + nx)
-                } else {
-                    Some(Some(outlet))
-                }
-            }
-            2 => {
-                if j > 0 {
-                    cell(u - 1)
-                } else if periodic && nx > 1 {
-                    cell(u + nx - 1)
-                } else {
-                    Some(None)
-                }
-            }
-            3 => {
-                if j + 1 < nx {
-                    cell(u + 1)
-                } else if periodic && nx > 1 {
-                    cell(u + 1 - nx)
-                } else {
-                    Some(None)
-                }
-            }
-            _ => None,
-        }
-    };
-    if !spanning.iter().any(|&s| s) {
+    if !spanning.par_iter().any(|&s| s) {
         return Vec::new();
     }
-    const UNSEEN: u32 = u32::MAX;
-    let mut disc = vec![UNSEEN; n + 2];
-    let mut low = vec![0u32; n + 2];
-    let mut parent = vec![NONE; n + 2];
-    // Whether the tree edge to the parent was passed over once (two faces between the same
-    // two cells, on a grid wrapped across two columns, are two edges).
-    let mut skipped = vec![false; n + 2];
-    let mut preorder: Vec<u32> = Vec::new();
-    let mut time = 0u32;
-    // (vertex, next slot)
-    let mut stack: Vec<(u32, u8)> = vec![(inlet as u32, 0)];
-    let mut reservoir_slot = [0usize; 2];
-    disc[inlet] = time;
-    low[inlet] = time;
-    time += 1;
-    while let Some(&mut (u, ref mut s)) = stack.last_mut() {
-        let u = u as usize;
-        // A reservoir's slots run past 255: kept apart, one counter each.
-        let at = if u >= n {
-            reservoir_slot[u - n]
-        } else {
-            *s as usize
-        };
-        match slot(u, at) {
-            None => {
-                stack.pop();
-                let p = parent[u];
-                if p != NONE {
-                    let p = p as usize;
-                    low[p] = low[p].min(low[u]);
-                }
-            }
-            Some(next) => {
-                if u >= n {
-                    reservoir_slot[u - n] += 1;
-                } else {
-                    *s += 1;
-                }
-                let Some(v) = next else { continue };
-                if disc[v] == UNSEEN {
-                    parent[v] = u as u32;
-                    disc[v] = time;
-                    low[v] = time;
-                    time += 1;
-                    if v < n {
-                        preorder.push(v as u32);
-                    }
-                    stack.push((v as u32, 0));
-                } else if v as u32 == parent[u] && !skipped[u] {
-                    skipped[u] = true;
-                } else {
-                    low[u] = low[u].min(disc[v]);
-                }
-            }
-        }
-    }
+    let edges = edge_masks(spanning, ny, nx, periodic);
+    let (disc, anchor, parent, preorder) = search(&edges, spanning, ny, nx);
     // The backbone is the block of the tree edge `I–O` (the inlet's first child is the
-    // outlet). A child `c` of `p` shares `p`'s block iff `low(c) < disc(p)`.
-    drop(skipped);
-    drop(stack);
-    // Each cell's anchor, [`NONE`] on the backbone, written over its low point once that is
-    // read (in preorder, a parent before its children).
-    let mut anchor = low;
+    // outlet). A child `c` of `p` shares `p`'s block iff `low(c) < disc(p)`. Each cell's
+    // anchor, [`NONE`] on the backbone, is written over its low point once that is read (in
+    // preorder, a parent before its children).
+    let mut anchor = anchor;
+    let (inlet, outlet) = (n, n + 1);
     anchor[inlet] = NONE;
     anchor[outlet] = NONE;
     let mut dead = Vec::new();
@@ -173,6 +68,150 @@ pub fn anchors(spanning: &[bool], ny: usize, nx: usize, periodic: bool) -> Vec<(
             dead.push((c as u32, a));
         }
     }
-    dead.sort_unstable();
+    dead.par_sort_unstable();
     dead
+}
+
+/// Edge bits of a cell in [`edge_masks`]: to the cell above (the inlet on row 0), below (the
+/// outlet on the last row), left and right.
+const UP: u8 = 1;
+const DOWN: u8 = 2;
+const LEFT: u8 = 4;
+const RIGHT: u8 = 8;
+/// The left (right) edge wraps to the row's other end.
+const LEFT_WRAPS: u8 = 16;
+const RIGHT_WRAPS: u8 = 32;
+
+/// Each spanning cell's edges in the graph ([`UP`] … [`RIGHT`], with [`LEFT_WRAPS`] and
+/// [`RIGHT_WRAPS`] on the first and last columns of a wrapped grid); 0 off the spanning cells.
+fn edge_masks(spanning: &[bool], ny: usize, nx: usize, periodic: bool) -> Vec<u8> {
+    let n = ny * nx;
+    let wraps = periodic && nx > 1;
+    (0..n)
+        .into_par_iter()
+        .map(|u| {
+            if !spanning[u] {
+                return 0;
+            }
+            let j = u % nx;
+            let mut m = 0;
+            if u < nx || spanning[u - nx] {
+                m |= UP;
+            }
+            if u + nx >= n || spanning[u + nx] {
+                m |= DOWN;
+            }
+            if j > 0 {
+                m |= if spanning[u - 1] { LEFT } else { 0 };
+            } else if wraps {
+                m |= LEFT_WRAPS | if spanning[u + nx - 1] { LEFT } else { 0 };
+            }
+            if j + 1 < nx {
+                m |= if spanning[u + 1] { RIGHT } else { 0 };
+            } else if wraps {
+                m |= RIGHT_WRAPS | if spanning[u + 1 - nx] { RIGHT } else { 0 };
+            }
+            m
+        })
+        .collect()
+}
+
+/// The depth-first search with low points from the inlet `I = n` (first to the outlet
+/// `O = n + 1` along the edge `I–O`): each vertex's discovery time, low point and parent, and
+/// the cells in preorder.
+#[allow(clippy::type_complexity)]
+fn search(
+    edges: &[u8],
+    spanning: &[bool],
+    ny: usize,
+    nx: usize,
+) -> (Vec<u32>, Vec<u32>, Vec<u32>, Vec<u32>) {
+    let n = ny * nx;
+    let (inlet, outlet) = (n, n + 1);
+    const UNSEEN: u32 = u32::MAX;
+    let mut disc = vec![UNSEEN; n + 2];
+    let mut low = vec![0u32; n + 2];
+    let mut parent = vec![NONE; n + 2];
+    let mut preorder: Vec<u32> = Vec::new();
+    // Each reservoir's spanning cells, and how many of them it has tried.
+    let rows: [Vec<u32>; 2] = [0, ny - 1].map(|i| {
+        (i * nx..(i + 1) * nx)
+            .filter(|&k| spanning[k])
+            .map(|k| k as u32)
+            .collect()
+    });
+    let mut tried = [0usize; 2];
+    // (vertex, its edges not yet tried, with the wrap bits): the path from the inlet.
+    let mut stack: Vec<(u32, u8)> = Vec::new();
+    let mut time = 0u32;
+    let mut discover = |v: usize, p: usize, time: &mut u32, disc: &mut [u32], low: &mut [u32]| {
+        parent[v] = p as u32;
+        disc[v] = *time;
+        low[v] = *time;
+        *time += 1;
+    };
+    discover(inlet, NONE as usize, &mut time, &mut disc, &mut low);
+    discover(outlet, inlet, &mut time, &mut disc, &mut low);
+    stack.push((inlet as u32, 0));
+    stack.push((outlet as u32, 0));
+    while let Some(&mut (u, ref mut left)) = stack.last_mut() {
+        let u = u as usize;
+        // The next neighbour and the edge bit by which it sees `u` (its parent edge if new).
+        let next = if u >= n {
+            let r = u - n;
+            let row = &rows[r];
+            if tried[r] < row.len() {
+                tried[r] += 1;
+                Some((row[tried[r] - 1] as usize, if r == 0 { UP } else { DOWN }))
+            } else {
+                None
+            }
+        } else if *left & 15 == 0 {
+            None
+        } else {
+            let bit = *left & left.wrapping_neg();
+            *left &= !bit;
+            Some(match bit {
+                UP => (if u < nx { inlet } else { u - nx }, DOWN),
+                DOWN => (if u + nx >= n { outlet } else { u + nx }, UP),
+                LEFT => (
+                    if *left & LEFT_WRAPS != 0 {
+                        u + nx - 1
+                    } else {
+                        u - 1
+                    },
+                    RIGHT,
+                ),
+                _ => (
+                    if *left & RIGHT_WRAPS != 0 {
+                        u + 1 - nx
+                    } else {
+                        u + 1
+                    },
+                    LEFT,
+                ),
+            })
+        };
+        match next {
+            None => {
+                stack.pop();
+                if let Some(&(p, _)) = stack.last() {
+                    let p = p as usize;
+                    low[p] = low[p].min(low[u]);
+                }
+            }
+            Some((v, back)) => {
+                if disc[v] == UNSEEN {
+                    discover(v, u, &mut time, &mut disc, &mut low);
+                    preorder.push(v as u32);
+                    // The edge back to `u` is the tree edge, passed over once; a second edge
+                    // between the same two cells (a wrapped grid of two columns) stays.
+                    stack.push((v as u32, edges[v] & !back));
+                } else {
+                    low[u] = low[u].min(disc[v]);
+                }
+            }
+        }
+    }
+    (disc, low, parent, preorder)
 }
