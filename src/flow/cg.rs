@@ -31,9 +31,23 @@ pub fn dot(a: &[f64], b: &[f64]) -> f64 {
     let parts: Vec<f64> = a
         .par_chunks(CHUNK)
         .zip(b.par_chunks(CHUNK))
-        .map(|(x, y)| x.iter().zip(y).map(|(u, v)| u * v).sum::<f64>())
+        .map(|(x, y)| chunk_dot(x, y))
         .collect();
     parts.iter().sum()
+}
+
+/// `Σ x_k y_k` in four interleaved partial sums (one chain of dependent additions would
+/// wait on each before the next).
+fn chunk_dot(x: &[f64], y: &[f64]) -> f64 {
+    let mut p = [0.0; 4];
+    let (x4, xr) = x.split_at(x.len() & !3);
+    for (a, b) in x4.chunks_exact(4).zip(y.chunks_exact(4)) {
+        for q in 0..4 {
+            p[q] += a[q] * b[q];
+        }
+    }
+    let rest: f64 = xr.iter().zip(&y[x4.len()..]).map(|(u, v)| u * v).sum();
+    (p[0] + p[1]) + (p[2] + p[3]) + rest
 }
 
 /// `Σ a_k`, deterministic.

@@ -124,12 +124,26 @@ pub(super) fn supernodal_backward<const K: usize>(
                     a[k] -= l * wt[k];
                 }
             }
-            for (&t, &l) in pattern.iter().zip(&col[ncols..]) {
+            // The pattern's sum in four interleaved partial sums: one chain of dependent
+            // multiply-adds would wait on each before the next (the forward half's updates
+            // are independent).
+            let below = &col[ncols..];
+            let mut part = [[0.0; K]; 4];
+            let (rows4, rows_rest) = pattern.split_at(pattern.len() & !3);
+            for (ts, ls) in rows4.chunks_exact(4).zip(below.chunks_exact(4)) {
+                for (q, p) in part.iter_mut().enumerate() {
+                    for k in 0..K {
+                        p[k] += ls[q] * w[K * ts[q] + k];
+                    }
+                }
+            }
+            for (&t, &l) in rows_rest.iter().zip(&below[rows4.len()..]) {
                 for k in 0..K {
-                    a[k] -= l * w[K * t + k];
+                    part[0][k] += l * w[K * t + k];
                 }
             }
             for k in 0..K {
+                a[k] -= (part[0][k] + part[1][k]) + (part[2][k] + part[3][k]);
                 w[K * i + k] = a[k] / col[c];
             }
         }
