@@ -1,6 +1,6 @@
-//! Sparse Cholesky solve of the Reynolds system on the cells with unknowns (faer,
-//! supernodal; each factor's arithmetic on one thread, so the bits do not depend on the
-//! thread count).
+//! Sparse Cholesky solve of the Reynolds system on the cells with unknowns (faer's
+//! supernodal symbolic analysis, the numeric factor in [`super::supernodal`]; each factor's
+//! arithmetic on one thread, so the bits do not depend on the thread count).
 //!
 //! The gaps of a contact close continuously at the contact edges, so `g³` spans fifteen
 //! orders of magnitude and the flow near the percolation threshold passes through necks whose
@@ -343,12 +343,9 @@ impl Factor {
         let t0 = std::time::Instant::now();
         let par = Par::Seq;
         let (entries, scratch_bytes) = match &analysis.structure {
-            Structure::Whole(symbolic) => (
-                symbolic.len_val(),
-                symbolic
-                    .factorize_numeric_llt_scratch::<f64>(par, Default::default())
-                    .size_bytes() as u64,
-            ),
+            Structure::Whole(symbolic) => {
+                (symbolic.len_val(), super::llt::scratch_bytes(symbolic, par))
+            }
             Structure::Halves(h) => (h.entries(), h.scratch_bytes()),
         };
         let need = factor_bytes(entries, scratch_bytes as usize);

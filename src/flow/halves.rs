@@ -10,10 +10,10 @@
 //!     | L_SA   L_SB  L_SS |
 //! ```
 //!
-//! and the columns of a side depend only on the rows of that side and of `S`. faer factors
+//! and the columns of a side depend only on the rows of that side and of `S`. The factor of
 //! the principal submatrix `M_A = A[A ∪ S, A ∪ S]` (positive definite, as a principal
 //! submatrix of a positive definite matrix), whose columns on `A` are `[L_AA; L_SA]`
-//! exactly, and `M_B` likewise, on the two threads. The separator block `L_A` of `M_A`'s
+//! exactly, and `M_B`'s are computed on the two threads ([`super::llt`]). The separator block `L_A` of `M_A`'s
 //! factor has `L_A L_Aᵀ = A_SS − L_SA L_SAᵀ`, so the separator's Schur complement is
 //! `A_SS − L_SA L_SAᵀ − L_SB L_SBᵀ = L_A L_Aᵀ + L_B L_Bᵀ − A_SS`, factored densely:
 //! `L_SS`. The factorisations of the separator blocks inside `M_A` and `M_B` and the two
@@ -152,19 +152,15 @@ impl Analysis {
             + self.k * self.k
     }
 
-    /// Bytes of the numeric factorisation beyond the entries: both sides' faer scratch and
+    /// Bytes of the numeric factorisation beyond the entries: both sides' scratch and
     /// the separator's dense blocks while `L_SS` is formed (two products and `A_SS`).
     pub fn scratch_bytes(&self) -> u64 {
-        let faer: usize = self
+        let sides: u64 = self
             .sides
             .iter()
-            .map(|s| {
-                s.symbolic
-                    .factorize_numeric_llt_scratch::<f64>(Par::Seq, Default::default())
-                    .size_bytes()
-            })
+            .map(|s| super::llt::scratch_bytes(&s.symbolic, Par::Seq))
             .sum();
-        faer as u64 + 3 * 8 * (self.k * self.k) as u64
+        sides + 3 * 8 * (self.k * self.k) as u64
     }
 
     /// Unknowns of the separator.
@@ -216,7 +212,9 @@ impl Factor {
         }
         let side = |sa: &SideAnalysis, a: Lower| -> Result<(Vec<f64>, Mat<f64>)> {
             let symbolic = &sa.symbolic;
+            let t0 = std::time::Instant::now();
             let values = llt_values(symbolic, &a, Par::Seq)?;
+            let t1 = t0.elapsed().as_secs_f64();
             drop(a);
             // The separator block `L_X` (rows and columns `own..`), then `L_X L_Xᵀ`.
             let (own, k) = (sa.own, sa.unknowns.len() - sa.own);
@@ -254,6 +252,35 @@ impl Factor {
                 1.0,
                 Par::Seq,
             );
+            if super::cg::profiling() {
+                let sn = supernodal(symbolic);
+                let (b, e, rp) = (
+                    sn.supernode_begin(),
+                    sn.supernode_end(),
+                    sn.col_ptr_for_row_idx(),
+                );
+                let mut flops = 0f64;
+                let mut hist = [0usize; 6];
+                for s in 0..sn.n_supernodes() {
+                    let nc = e[s] - b[s];
+                    let nr = nc + rp[s + 1] - rp[s];
+                    hist[(usize::BITS - nc.leading_zeros()).min(5) as usize] += 1;
+                    for c in 0..nc {
+                        let k = (nr - c) as f64;
+                        flops += k * k;
+                    }
+                }
+                eprintln!(
+                    "halves: {} supernodes, widths by log2 {hist:?}, {flops:.3e} flops",
+                    sn.n_supernodes()
+                );
+                eprintln!(
+                    "halves: side of {} unknowns ({} entries): llt {t1:.4} s, separator block and product {:.4} s",
+                    sa.unknowns.len(),
+                    symbolic.len_val(),
+                    t0.elapsed().as_secs_f64() - t1
+                );
+            }
             Ok((values, t))
         };
         let (a, b) = rayon::join(|| side(&an.sides[0], ma), || side(&an.sides[1], mb));

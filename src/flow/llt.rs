@@ -1,9 +1,11 @@
-//! One faer supernodal numeric factor `L Lᵀ` of a matrix on its symbolic analysis, and the
+//! The numeric factor `L Lᵀ` of a matrix on its symbolic analysis, and the
 //! error a sparse Cholesky factor reports ([`super::direct`], [`super::halves`]).
 
 use faer::dyn_stack::{MemBuffer, MemStack};
-use faer::sparse::linalg::cholesky::SymbolicCholesky;
-use faer::sparse::SparseColMat;
+use faer::sparse::linalg::cholesky::{SymbolicCholesky, SymbolicCholeskyRaw};
+use faer::sparse::{SparseColMat, SymbolicSparseColMat};
+
+use super::supernodal::{self, factor_values};
 use faer::{Par, Side};
 
 use crate::error::{Error, Result};
@@ -17,17 +19,28 @@ pub(super) fn failed(what: impl std::fmt::Display) -> Error {
     }
 }
 
-/// The values of the factor of `a` (lower triangle) on `symbolic`, with `par`.
+/// The values of the factor of `a` (lower triangle) on `symbolic`: a supernodal structure's
+/// by [`super::supernodal`] (on `a` permuted to the factor's order when the analysis has a
+/// permutation), a simplicial one's by faer with `par`.
 pub(super) fn llt_values(
     symbolic: &SymbolicCholesky<usize>,
     a: &SparseColMat<usize, f64>,
     par: Par,
 ) -> Result<Vec<f64>> {
-    let scratch = symbolic.factorize_numeric_llt_scratch::<f64>(par, Default::default());
-    // Zeroed pages from the kernel: the factorisation writes every value, so filling them
-    // here too would be a pass over the whole factor for nothing.
+    // Zeroed pages from the kernel: both factorisations add into them.
     let mut values: Vec<f64> = crate::alloc::try_zeroed(symbolic.len_val(), "the factor")
         .map_err(|_| failed("out of memory"))?;
+    if let SymbolicCholeskyRaw::Supernodal(sn) = symbolic.raw() {
+        // Written once here: a kernel's zero page is first read where the factor adds into
+        // it, then faulted again where it is written.
+        values.fill(0.0);
+        let permuted = symbolic.perm().map(|p| permuted_lower(a, p.arrays().1));
+        let a = permuted.as_ref().unwrap_or(a);
+        factor_values(sn, a.as_ref(), &mut values)
+            .map_err(|j| failed(format!("the pivot of column {j} is not positive")))?;
+        return Ok(values);
+    }
+    let scratch = symbolic.factorize_numeric_llt_scratch::<f64>(par, Default::default());
     let mut buf = MemBuffer::try_new(scratch).map_err(|_| failed("out of memory"))?;
     symbolic
         .factorize_numeric_llt::<f64>(
@@ -41,4 +54,54 @@ pub(super) fn llt_values(
         )
         .map_err(|e| failed(format!("{e:?}")))?;
     Ok(values)
+}
+
+/// Bytes of [`llt_values`]'s scratch beside the values: the supernodal factor's (with the
+/// permuted operator, at most four entries per column), or faer's for a simplicial one.
+pub(super) fn scratch_bytes(symbolic: &SymbolicCholesky<usize>, par: Par) -> u64 {
+    match symbolic.raw() {
+        SymbolicCholeskyRaw::Supernodal(sn) => {
+            let permuted = if symbolic.perm().is_some() {
+                8 * (5 * sn.nrows() as u64 + 1)
+            } else {
+                0
+            };
+            supernodal::scratch_bytes(sn) + permuted
+        }
+        SymbolicCholeskyRaw::Simplicial(_) => symbolic
+            .factorize_numeric_llt_scratch::<f64>(par, Default::default())
+            .size_bytes() as u64,
+    }
+}
+
+/// The lower triangle of `P A Pᵀ` from `a`'s (`inv[i]`: the position of unknown `i` in the
+/// factor's order), by columns (rows unsorted).
+fn permuted_lower(a: &SparseColMat<usize, f64>, inv: &[usize]) -> SparseColMat<usize, f64> {
+    let m = a.nrows();
+    let (ptr, rows, vals) = (a.symbolic().col_ptr(), a.symbolic().row_idx(), a.val());
+    // Each stored entry's position `(row, column)` in the lower triangle of `P A Pᵀ`.
+    let entries = || {
+        (0..m).flat_map(move |j| {
+            (ptr[j]..ptr[j + 1]).map(move |p| {
+                let (r, c) = (inv[rows[p]], inv[j]);
+                (r.max(c), r.min(c), vals[p])
+            })
+        })
+    };
+    let mut col_ptr = vec![0usize; m + 1];
+    for (_, c, _) in entries() {
+        col_ptr[c + 1] += 1;
+    }
+    for c in 0..m {
+        col_ptr[c + 1] += col_ptr[c];
+    }
+    let mut fill = col_ptr[..m].to_vec();
+    let (mut row_idx, mut values) = (vec![0usize; ptr[m]], vec![0.0; ptr[m]]);
+    for (r, c, v) in entries() {
+        row_idx[fill[c]] = r;
+        values[fill[c]] = v;
+        fill[c] += 1;
+    }
+    let pattern = SymbolicSparseColMat::new_unsorted_checked(m, m, col_ptr, None, row_idx);
+    SparseColMat::new(pattern, values)
 }

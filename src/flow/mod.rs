@@ -54,6 +54,7 @@ pub mod multigrid;
 pub mod order;
 mod paths;
 mod substitution;
+mod supernodal;
 
 use rayon::prelude::*;
 

@@ -7,6 +7,7 @@ mod exact;
 mod inputs;
 mod ordering;
 mod reference;
+mod supernodal;
 mod threshold;
 
 /// [`crate::test_support::lcg`] from `seed` advanced once (the flow tests' inputs).

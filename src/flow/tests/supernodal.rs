@@ -1,0 +1,163 @@
+//! The numeric supernodal factor against faer's on the same analysis, and the residual of
+//! its solves.
+use super::*;
+use crate::flow::llt::llt_values;
+use crate::flow::substitution::{supernodal_solve, Supernode};
+use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::sparse::linalg::cholesky::{
+    factorize_symbolic_cholesky, CholeskySymbolicParams, SymbolicCholesky, SymbolicCholeskyRaw,
+    SymmetricOrdering,
+};
+use faer::sparse::linalg::SupernodalThreshold;
+use faer::sparse::{SparseColMat, SymbolicSparseColMat};
+use faer::{Par, Side};
+
+/// The lower triangle of a wrapped `ny × nx` grid's operator: face conductances `10^(-6u)`
+/// (`u` uniform), the diagonal their sum plus `shift` times the largest (negative `shift`
+/// at cell `bad`: not positive definite there).
+fn grid_operator(ny: usize, nx: usize, seed: u64, bad: Option<usize>) -> SparseColMat<usize, f64> {
+    let n = ny * nx;
+    let u = lcg(seed, 2 * n);
+    let c: Vec<f64> = u.iter().map(|&v| 10f64.powf(-6.0 * v)).collect();
+    let mut cols: Vec<Vec<(usize, f64)>> = vec![Vec::new(); n];
+    let mut diag = vec![1e-3; n];
+    for k in 0..n {
+        let (i, j) = (k / nx, k % nx);
+        for (l, g) in [
+            (i * nx + (j + 1) % nx, c[2 * k]),
+            (((i + 1) % ny) * nx + j, c[2 * k + 1]),
+        ] {
+            let (lo, hi) = (k.min(l), k.max(l));
+            cols[lo].push((hi, -g));
+            diag[k] += g;
+            diag[l] += g;
+        }
+    }
+    if let Some(b) = bad {
+        diag[b] = -1.0;
+    }
+    let (mut ptr, mut rows, mut vals) = (vec![0], Vec::new(), Vec::new());
+    for (k, col) in cols.iter_mut().enumerate() {
+        col.push((k, diag[k]));
+        col.sort_by_key(|e| e.0);
+        for &(r, v) in col.iter() {
+            rows.push(r);
+            vals.push(v);
+        }
+        ptr.push(rows.len());
+    }
+    SparseColMat::new(
+        SymbolicSparseColMat::new_checked(n, n, ptr, None, rows),
+        vals,
+    )
+}
+
+fn analysis(a: &SparseColMat<usize, f64>, amd: bool) -> SymbolicCholesky<usize> {
+    let params = CholeskySymbolicParams {
+        supernodal_flop_ratio_threshold: SupernodalThreshold::FORCE_SUPERNODAL,
+        ..Default::default()
+    };
+    let id: Vec<usize> = (0..a.nrows()).collect();
+    let order = if amd {
+        SymmetricOrdering::Amd
+    } else {
+        SymmetricOrdering::Custom(faer::perm::PermRef::new_checked(&id, &id, id.len()))
+    };
+    factorize_symbolic_cholesky(a.symbolic(), Side::Lower, order, params).unwrap()
+}
+
+/// The factor's values match faer's numeric factor on the same analysis, with a fill-reducing
+/// order (the operator permuted; on 64 × 64, supernodes past the dense threshold) and in
+/// grid order, and its solve leaves a residual at round-off.
+#[test]
+fn the_supernodal_factor_matches_faers_and_solves() {
+    for (ny, nx, amd) in [
+        (24, 31, true),
+        (40, 40, false),
+        (9, 70, true),
+        (64, 64, true),
+    ] {
+        let a = grid_operator(ny, nx, 7 + ny as u64, None);
+        let symbolic = analysis(&a, amd);
+        let SymbolicCholeskyRaw::Supernodal(sn) = symbolic.raw() else {
+            panic!("a supernodal analysis")
+        };
+        if ny == 64 {
+            // Wide supernodes with rows below them: the dense factor and product.
+            let wide = (0..sn.n_supernodes())
+                .filter(|&s| {
+                    let rp = sn.col_ptr_for_row_idx();
+                    sn.supernode_end()[s] - sn.supernode_begin()[s] >= 32 && rp[s + 1] > rp[s]
+                })
+                .count();
+            assert!(wide > 0, "no wide supernode with a pattern");
+        }
+        let ours = llt_values(&symbolic, &a, Par::Seq).unwrap();
+        let mut theirs = vec![0.0; symbolic.len_val()];
+        let scratch = symbolic.factorize_numeric_llt_scratch::<f64>(Par::Seq, Default::default());
+        let mut buf = MemBuffer::new(scratch);
+        symbolic
+            .factorize_numeric_llt::<f64>(
+                &mut theirs,
+                a.as_ref(),
+                Side::Lower,
+                Default::default(),
+                Par::Seq,
+                MemStack::new(&mut buf),
+                Default::default(),
+            )
+            .unwrap();
+        // Entries of the diagonal blocks' upper triangles are not part of the factor.
+        for s in 0..sn.n_supernodes() {
+            let node = Supernode::of(sn, &ours, s);
+            let them = Supernode::of(sn, &theirs, s);
+            for c in 0..node.ncols {
+                let (x, y) = (node.column(c), them.column(c));
+                for r in c..x.len() {
+                    let scale = y[c].abs().max(1e-300);
+                    assert!(
+                        (x[r] - y[r]).abs() <= 1e-11 * scale,
+                        "{ny}×{nx}: supernode {s} column {c} row {r}: {} against {}",
+                        x[r],
+                        y[r]
+                    );
+                }
+            }
+        }
+        // `A x = b` through the factor's order, residual against the operator.
+        let n = ny * nx;
+        let b = lcg(3, n);
+        let (fwd, inv) = match symbolic.perm() {
+            Some(p) => (p.arrays().0.to_vec(), p.arrays().1.to_vec()),
+            None => ((0..n).collect(), (0..n).collect()),
+        };
+        let mut w: Vec<f64> = fwd.iter().map(|&q| b[q]).collect();
+        supernodal_solve(sn, &ours, &mut w);
+        let x: Vec<f64> = (0..n).map(|q| w[inv[q]]).collect();
+        let mut r = b.clone();
+        let (ptr, rows, vals) = (a.symbolic().col_ptr(), a.symbolic().row_idx(), a.val());
+        for j in 0..n {
+            for p in ptr[j]..ptr[j + 1] {
+                let i = rows[p];
+                r[i] -= vals[p] * x[j];
+                if i != j {
+                    r[j] -= vals[p] * x[i];
+                }
+            }
+        }
+        let rel = r.iter().map(|v| v * v).sum::<f64>().sqrt()
+            / b.iter().map(|v| v * v).sum::<f64>().sqrt();
+        assert!(rel < 1e-12, "{ny}×{nx}: relative residual {rel:e}");
+    }
+}
+
+/// A matrix that is not positive definite is refused, not factored into NaNs.
+#[test]
+fn the_supernodal_factor_refuses_a_matrix_that_is_not_positive_definite() {
+    for amd in [true, false] {
+        let a = grid_operator(20, 20, 5, Some(137));
+        let symbolic = analysis(&a, amd);
+        let err = llt_values(&symbolic, &a, Par::Seq).expect_err("a refusal");
+        assert!(format!("{err}").contains("not positive"), "{err}");
+    }
+}
