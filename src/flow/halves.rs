@@ -10,11 +10,11 @@
 //!     | L_SA   L_SB  L_SS |
 //! ```
 //!
-//! and the columns of a side depend only on the rows of that side and of `S`. The factor of
-//! the principal submatrix `M_A = A[A ∪ S, A ∪ S]` (positive definite, as a principal
+//! and the columns of a side depend only on the rows of that side and of `S`. The factors
+//! of the principal submatrix `M_A = A[A ∪ S, A ∪ S]` (positive definite, as a principal
 //! submatrix of a positive definite matrix), whose columns on `A` are `[L_AA; L_SA]`
-//! exactly, and `M_B`'s are computed on the two threads ([`super::llt`]). The separator block `L_A` of `M_A`'s
-//! factor has `L_A L_Aᵀ = A_SS − L_SA L_SAᵀ`, so the separator's Schur complement is
+//! exactly, and of `M_B` are computed on the two threads ([`super::llt`]). The separator
+//! block `L_A` of `M_A`'s factor has `L_A L_Aᵀ = A_SS − L_SA L_SAᵀ`, so the separator's Schur complement is
 //! `A_SS − L_SA L_SAᵀ − L_SB L_SBᵀ = L_A L_Aᵀ + L_B L_Bᵀ − A_SS`, factored densely:
 //! `L_SS`. The factorisations of the separator blocks inside `M_A` and `M_B` and the two
 //! products are the price (`k³/3` flops each, `k` ≈ the grid's side): small against the
@@ -185,6 +185,34 @@ fn side_matrix(st: &Stencil, index: &[usize], cells: &[usize], unknowns: &[usize
     SparseColMat::new(pattern, vals)
 }
 
+/// `LEAKPATH_FLOW_PROFILE`'s lines for a side: its supernodes by width (powers of two), the
+/// factor's flops, and the times of its numeric factor and of its separator's product.
+fn profile_side(sa: &SideAnalysis, t_factor: f64, t_separator: f64) {
+    let sn = supernodal(&sa.symbolic);
+    let (b, e, rp) = (
+        sn.supernode_begin(),
+        sn.supernode_end(),
+        sn.col_ptr_for_row_idx(),
+    );
+    let mut flops = 0f64;
+    let mut widths = [0usize; 6];
+    for s in 0..sn.n_supernodes() {
+        let nc = e[s] - b[s];
+        let nr = nc + rp[s + 1] - rp[s];
+        widths[(usize::BITS - nc.leading_zeros()).min(5) as usize] += 1;
+        flops += (0..nc).map(|c| ((nr - c) * (nr - c)) as f64).sum::<f64>();
+    }
+    eprintln!(
+        "halves: side of {} unknowns, {} entries, {} supernodes (by width 1, 2-3, 4-7, 8-15, \
+         16+: {:?}), {flops:.3e} flops; numeric {t_factor:.4} s, separator's product \
+         {t_separator:.4} s",
+        sa.unknowns.len(),
+        sa.symbolic.len_val(),
+        sn.n_supernodes(),
+        &widths[1..],
+    );
+}
+
 fn supernodal(s: &SymbolicCholesky<usize>) -> &SymbolicSupernodalCholesky<usize> {
     match s.raw() {
         SymbolicCholeskyRaw::Supernodal(sn) => sn,
@@ -253,33 +281,7 @@ impl Factor {
                 Par::Seq,
             );
             if super::cg::profiling() {
-                let sn = supernodal(symbolic);
-                let (b, e, rp) = (
-                    sn.supernode_begin(),
-                    sn.supernode_end(),
-                    sn.col_ptr_for_row_idx(),
-                );
-                let mut flops = 0f64;
-                let mut hist = [0usize; 6];
-                for s in 0..sn.n_supernodes() {
-                    let nc = e[s] - b[s];
-                    let nr = nc + rp[s + 1] - rp[s];
-                    hist[(usize::BITS - nc.leading_zeros()).min(5) as usize] += 1;
-                    for c in 0..nc {
-                        let k = (nr - c) as f64;
-                        flops += k * k;
-                    }
-                }
-                eprintln!(
-                    "halves: {} supernodes, widths by log2 {hist:?}, {flops:.3e} flops",
-                    sn.n_supernodes()
-                );
-                eprintln!(
-                    "halves: side of {} unknowns ({} entries): llt {t1:.4} s, separator block and product {:.4} s",
-                    sa.unknowns.len(),
-                    symbolic.len_val(),
-                    t0.elapsed().as_secs_f64() - t1
-                );
+                profile_side(sa, t1, t0.elapsed().as_secs_f64() - t1);
             }
             Ok((values, t))
         };

@@ -4,10 +4,9 @@
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::sparse::linalg::cholesky::{SymbolicCholesky, SymbolicCholeskyRaw};
 use faer::sparse::{SparseColMat, SymbolicSparseColMat};
-
-use super::supernodal::{self, factor_values};
 use faer::{Par, Side};
 
+use super::supernodal::{self, factor_values};
 use crate::error::{Error, Result};
 
 /// The sparse Cholesky factor's failure: `what` went wrong.

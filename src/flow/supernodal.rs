@@ -4,21 +4,23 @@
 //! The flow's factors have thousands of supernodes of about four to sixteen columns
 //! (docs/flow.md): faer's numeric factor dispatches a dense product per update and a dense
 //! Cholesky and triangular solve per supernode, whose set-up costs more than their
-//! arithmetic at these sizes. Here each supernode is factored left-looking, as faer does
-//! and with the same layout of values (each supernode a dense column-major block, its
-//! diagonal block on top of the rows of its pattern), so the solves
-//! ([`super::substitution`]) read either:
+//! arithmetic at these sizes. Here the values keep faer's layout (each supernode a dense
+//! column-major block, its diagonal block on top of the rows of its pattern `P`), so the
+//! solves ([`super::substitution`]) read either, and the supernodes are taken in order,
+//! right-looking:
 //!
-//! 1. the supernode's columns of `A` are added into its block;
-//! 2. every earlier supernode `d` whose pattern has rows among its columns subtracts its
-//!    update `L_d[r, :] L_d[c, :]ᵀ` (rows `r` of `d`'s pattern from the first in the
-//!    supernode's columns on, columns `c` among them), found by linked lists (each `d` is
-//!    queued on the supernode of the next row of its pattern it has not applied);
-//! 3. the block is factored column by column: `L_cc = √a_cc`, the column below divided by
-//!    it, and its outer product subtracted from the columns to its right.
+//! 1. the supernode's columns of `A` are added into its block (the updates of the
+//!    supernodes before it are already there);
+//! 2. the block is factored column by column: `L_cc = √a_cc`, the column below divided by
+//!    it, and its outer product subtracted from the columns to its right;
+//! 3. its update `U = L[P, :] L[P, :]ᵀ` (lower triangle) is formed once, in 4 × 4 tiles of
+//!    its packed rows, and each column of `U` is subtracted from the block of the later
+//!    supernode that holds that column, through the rows' positions in that block.
 //!
-//! The arithmetic is sequential and compiled for the baseline instruction set, so the
-//! values are the same bits on every x86-64 CPU and thread count.
+//! Supernodes of [`DENSE`] columns and more are factored and multiplied by faer's dense
+//! kernels. The others' arithmetic is plain code for the baseline instruction set, the same
+//! bits on every x86-64 CPU; all of it is sequential, so the values do not depend on the
+//! thread count.
 
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::llt::factor::{cholesky_in_place, cholesky_in_place_scratch, LltError};
