@@ -39,12 +39,11 @@ pub fn anchors(spanning: &[bool], ny: usize, nx: usize, periodic: bool) -> Vec<(
         return Vec::new();
     }
     let edges = edge_masks(spanning, ny, nx, periodic);
-    let (disc, anchor, parent, preorder) = search(&edges, spanning, ny, nx);
+    let (disc, mut anchor, parent, preorder) = search(&edges, spanning, ny, nx);
     // The backbone is the block of the tree edge `I–O` (the inlet's first child is the
     // outlet). A child `c` of `p` shares `p`'s block iff `low(c) < disc(p)`. Each cell's
     // anchor, [`NONE`] on the backbone, is written over its low point once that is read (in
     // preorder, a parent before its children).
-    let mut anchor = anchor;
     let (inlet, outlet) = (n, n + 1);
     anchor[inlet] = NONE;
     anchor[outlet] = NONE;

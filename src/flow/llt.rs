@@ -26,19 +26,21 @@ pub(super) fn llt_values(
     a: &SparseColMat<usize, f64>,
     par: Par,
 ) -> Result<Vec<f64>> {
-    // Zeroed pages from the kernel: both factorisations add into them.
-    let mut values: Vec<f64> = crate::alloc::try_zeroed(symbolic.len_val(), "the factor")
-        .map_err(|_| failed("out of memory"))?;
+    let len = symbolic.len_val();
     if let SymbolicCholeskyRaw::Supernodal(sn) = symbolic.raw() {
-        // Written once here: a kernel's zero page is first read where the factor adds into
-        // it, then faulted again where it is written.
-        values.fill(0.0);
+        // Zeros written here, not the kernel's zero pages: the factor adds into its values,
+        // and a zero page first read there is faulted again where it is written.
+        let mut values = crate::alloc::try_filled(len, 0.0, "the factor")
+            .map_err(|_| failed("out of memory"))?;
         let permuted = symbolic.perm().map(|p| permuted_lower(a, p.arrays().1));
         let a = permuted.as_ref().unwrap_or(a);
         factor_values(sn, a.as_ref(), &mut values)
             .map_err(|j| failed(format!("the pivot of column {j} is not positive")))?;
         return Ok(values);
     }
+    // Zeroed pages from the kernel: faer writes every value before it reads one.
+    let mut values: Vec<f64> =
+        crate::alloc::try_zeroed(len, "the factor").map_err(|_| failed("out of memory"))?;
     let scratch = symbolic.factorize_numeric_llt_scratch::<f64>(par, Default::default());
     let mut buf = MemBuffer::try_new(scratch).map_err(|_| failed("out of memory"))?;
     symbolic
@@ -56,12 +58,14 @@ pub(super) fn llt_values(
 }
 
 /// Bytes of [`llt_values`]'s scratch beside the values: the supernodal factor's (with the
-/// permuted operator, at most four entries per column), or faer's for a simplicial one.
+/// permuted operator: at most three entries per column of the five-point stencil's lower
+/// triangle, row and value each, the column pointers and their fill counters), or faer's
+/// for a simplicial one.
 pub(super) fn scratch_bytes(symbolic: &SymbolicCholesky<usize>, par: Par) -> u64 {
     match symbolic.raw() {
         SymbolicCholeskyRaw::Supernodal(sn) => {
             let permuted = if symbolic.perm().is_some() {
-                8 * (5 * sn.nrows() as u64 + 1)
+                8 * (8 * sn.nrows() as u64 + 1)
             } else {
                 0
             };

@@ -153,7 +153,6 @@ const TILE: usize = 4;
 /// The pattern's `m` rows of a factored block (`nr` rows, `nc` columns, column-major, the
 /// pattern's rows from `nc`) into `packed` by tiles of [`TILE`] rows: tile `t`'s column `c`
 /// at `(t · nc + c) · TILE`, rows past `m` zero.
-#[inline(never)]
 fn pack(packed: &mut Vec<f64>, block: &[f64], nr: usize, nc: usize, m4: usize) {
     packed.clear();
     packed.resize(m4 * nc, 0.0);
@@ -184,7 +183,6 @@ fn tile(packed: &[f64], ncd: usize, i0: usize, q0: usize) -> [[f64; TILE]; TILE]
 
 /// `U = X Xᵀ` in tiles ([`tile`]) of the packed rows `X` (`m4` rows, `nc` columns): its
 /// lower tiles into `update` (`m4 × m4`, column-major).
-#[inline(never)]
 fn products(update: &mut Vec<f64>, packed: &[f64], nc: usize, m4: usize) {
     update.clear();
     update.resize(m4 * m4, 0.0);
@@ -200,7 +198,6 @@ fn products(update: &mut Vec<f64>, packed: &[f64], nc: usize, m4: usize) {
 
 /// The supernode's block (`nr × nc`, column-major, updated) factored in place column by
 /// column; `Err(c)`: the pivot of column `c` is not positive and finite.
-#[inline(never)]
 fn factor_block(block: &mut [f64], nr: usize, nc: usize) -> Result<(), usize> {
     if nc >= DENSE {
         return factor_block_dense(block, nr, nc);

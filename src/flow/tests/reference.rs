@@ -26,23 +26,7 @@ fn dense_reference(
                 continue;
             }
             seen[k] = true;
-            let (i, j) = (k / nx, k % nx);
-            if i > 0 {
-                stack.push(k - nx);
-            }
-            if i + 1 < ny {
-                stack.push(k + nx);
-            }
-            if j > 0 {
-                stack.push(k - 1);
-            } else if periodic {
-                stack.push(k + nx - 1);
-            }
-            if j + 1 < nx {
-                stack.push(k + 1);
-            } else if periodic {
-                stack.push(k + 1 - nx);
-            }
+            stack.extend(grid_neighbours(k, ny, nx, periodic));
         }
         seen
     };
