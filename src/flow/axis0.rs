@@ -448,9 +448,9 @@ fn factored(
         let a = solve_direct(&mut f, fine, rhs, b_out);
         let t_solve = cg::secs(t0);
         let t0 = std::time::Instant::now();
-        let ok = trusted(rhs, b_out, &a, trust);
+        let ok = trusted(&a, trust);
         if prof {
-            let (_, (e_out, e_in)) = paths::rate_errors(rhs, b_out, &a);
+            let (_, (e_out, e_in)) = a.rate_errors();
             eprintln!(
                 "flow: solve and residuals {t_solve:.3} s, checks {:.3} s ({}; rate \
                  errors {e_out:.1e}, {e_in:.1e}, kept at {trust:.0e})",
@@ -463,9 +463,9 @@ fn factored(
         }
         let t0 = std::time::Instant::now();
         let a = split_direct(&mut f, fine, rhs, b_out, a, trust);
-        let ok = trusted(rhs, b_out, &a, trust);
+        let ok = trusted(&a, trust);
         if prof {
-            let (_, (e_out, e_in)) = paths::rate_errors(rhs, b_out, &a);
+            let (_, (e_out, e_in)) = a.rate_errors();
             eprintln!(
                 "flow: refinement in two doubles and checks {:.3} s ({}; rate errors \
                  {e_out:.1e}, {e_in:.1e})",

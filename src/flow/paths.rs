@@ -20,33 +20,150 @@ pub(super) fn rates_agree(q_in: f64, q_out: f64) -> bool {
 }
 
 /// A factored solve: `φ` and `ψ`, their exact residuals `b_in − A φ` and `b_out − A ψ`
-/// (summed in double-double arithmetic) and relative residuals, and the low parts of `φ`
-/// and `ψ` when they are carried in two doubles (empty otherwise).
+/// (summed in double-double arithmetic), the low parts of `φ` and `ψ` when they are carried
+/// in two doubles (empty otherwise), and what [`trusted`] reads of them ([`Checks`]).
 pub(super) struct DirectAnswer {
     pub(super) x: Vec<f64>,
     pub(super) psi: Vec<f64>,
     r_x: Vec<f64>,
     r_psi: Vec<f64>,
-    rel_x: f64,
-    rel_psi: f64,
     pub(super) lo: (Vec<f64>, Vec<f64>),
+    checks: Checks,
 }
 
 impl DirectAnswer {
     /// The larger relative residual of `φ` and `ψ`.
     pub(super) fn residual(&self) -> f64 {
-        self.rel_x.max(self.rel_psi)
+        self.checks.rel.0.max(self.checks.rel.1)
+    }
+
+    /// The two rates `Q_out = b_out · φ`, `Q_in = b_in · ψ` and their first-order errors
+    /// relative to them, `|ψ · (b_in − A φ)| / Q_out` and `|φ · (b_out − A ψ)| / Q_in` (the
+    /// errors infinite when a rate is not positive and finite).
+    pub(super) fn rate_errors(&self) -> ((f64, f64), (f64, f64)) {
+        (self.checks.rates, self.checks.errors)
     }
 }
 
-/// `‖r‖₂ / ‖b‖₂`.
-fn relative(r: &[f64], b: &[f64]) -> f64 {
-    let bn = cg::dot(b, b).sqrt();
-    if bn == 0.0 {
-        0.0
-    } else {
-        cg::dot(r, r).sqrt() / bn
+/// What the checks of a factored answer read, from one pass over its vectors
+/// ([`Checks::of`]): the relative residuals `‖r‖₂ / ‖b‖₂` of `φ` and `ψ`, the rates and
+/// their first-order errors ([`DirectAnswer::rate_errors`]), and whether every pressure is
+/// in `[0, 1]` to round-off (the maximum principle).
+#[derive(Clone, Copy)]
+struct Checks {
+    rel: (f64, f64),
+    rates: (f64, f64),
+    errors: (f64, f64),
+    in_range: bool,
+}
+
+/// One chunk's sums for [`Checks`]: each sum over `k` in index order.
+#[derive(Clone, Copy, Default)]
+struct Sums {
+    /// `r_φ · r_φ`, `r_ψ · r_ψ`, `b_in · b_in`, `b_out · b_out`.
+    norms: [f64; 4],
+    /// `b_out · φ`, `b_out · φ_lo`, `b_in · ψ`, `b_in · ψ_lo`.
+    rates: [f64; 4],
+    /// `r_φ · ψ`, `r_φ · ψ_lo`, `r_ψ · φ`, `r_ψ · φ_lo`.
+    errors: [f64; 4],
+    in_range: bool,
+}
+
+impl Checks {
+    /// The checks of `a` (its `checks` ignored) for the right-hand sides `b_in` and `b_out`:
+    /// every vector read once, in fixed chunks of [`cg::CHUNK`] summed in chunk order (the
+    /// same bits for any number of threads). The sums of a vector carried in two doubles
+    /// add its high and low parts' sums, as two separate dot products would.
+    fn of(b_in: &[f64], b_out: &[f64], a: &DirectAnswer) -> Checks {
+        let n = b_in.len();
+        let split = !a.lo.0.is_empty();
+        let parts: Vec<Sums> = (0..n.div_ceil(cg::CHUNK))
+            .into_par_iter()
+            .map(|c| {
+                let r = c * cg::CHUNK..n.min((c + 1) * cg::CHUNK);
+                if split {
+                    chunk_sums::<true>(b_in, b_out, a, r)
+                } else {
+                    chunk_sums::<false>(b_in, b_out, a, r)
+                }
+            })
+            .collect();
+        let mut t = Sums {
+            in_range: true,
+            ..Sums::default()
+        };
+        for p in &parts {
+            for q in 0..4 {
+                t.norms[q] += p.norms[q];
+                t.rates[q] += p.rates[q];
+                t.errors[q] += p.errors[q];
+            }
+            t.in_range &= p.in_range;
+        }
+        let relative = |rr: f64, bb: f64| {
+            if bb == 0.0 {
+                0.0
+            } else {
+                rr.sqrt() / bb.sqrt()
+            }
+        };
+        let (q_out, q_in) = (t.rates[0] + t.rates[1], t.rates[2] + t.rates[3]);
+        let errors = if q_out.is_finite() && q_in.is_finite() && q_out > 0.0 && q_in > 0.0 {
+            (
+                (t.errors[0] + t.errors[1]).abs() / q_out,
+                (t.errors[2] + t.errors[3]).abs() / q_in,
+            )
+        } else {
+            (f64::INFINITY, f64::INFINITY)
+        };
+        Checks {
+            rel: (
+                relative(t.norms[0], t.norms[2]),
+                relative(t.norms[1], t.norms[3]),
+            ),
+            rates: (q_out, q_in),
+            errors,
+            in_range: t.in_range,
+        }
     }
+}
+
+/// [`Sums`] over the entries `r` (`SPLIT`: `φ` and `ψ` carried in two doubles).
+fn chunk_sums<const SPLIT: bool>(
+    b_in: &[f64],
+    b_out: &[f64],
+    a: &DirectAnswer,
+    r: std::ops::Range<usize>,
+) -> Sums {
+    let mut s = Sums {
+        in_range: true,
+        ..Sums::default()
+    };
+    let range = -1e-12..=1.0 + 1e-12;
+    for k in r {
+        let (x, p, rx, rp) = (a.x[k], a.psi[k], a.r_x[k], a.r_psi[k]);
+        let (bi, bo) = (b_in[k], b_out[k]);
+        s.norms[0] += rx * rx;
+        s.norms[1] += rp * rp;
+        s.norms[2] += bi * bi;
+        s.norms[3] += bo * bo;
+        s.rates[0] += bo * x;
+        s.rates[2] += bi * p;
+        s.errors[0] += rx * p;
+        s.errors[2] += rp * x;
+        let (xv, pv) = if SPLIT {
+            let (xl, pl) = (a.lo.0[k], a.lo.1[k]);
+            s.rates[1] += bo * xl;
+            s.rates[3] += bi * pl;
+            s.errors[1] += rx * pl;
+            s.errors[3] += rp * xl;
+            (x + xl, p + pl)
+        } else {
+            (x, p)
+        };
+        s.in_range &= range.contains(&xv) & range.contains(&pv);
+    }
+    s
 }
 
 /// `φ` (inlet at 1) and `ψ` (outlet at 1) from the factor, both columns in one pass, with
@@ -67,15 +184,21 @@ pub(super) fn solve_direct(
     let (mut r_x, mut r_psi) = (zeroed_now(n), zeroed_now(n));
     st.residual_compensated(&x, b_in, &mut r_x);
     st.residual_compensated(&psi, b_out, &mut r_psi);
-    DirectAnswer {
-        rel_x: relative(&r_x, b_in),
-        rel_psi: relative(&r_psi, b_out),
+    let mut a = DirectAnswer {
         x,
         psi,
         r_x,
         r_psi,
         lo: (Vec::new(), Vec::new()),
-    }
+        checks: Checks {
+            rel: (0.0, 0.0),
+            rates: (0.0, 0.0),
+            errors: (0.0, 0.0),
+            in_range: false,
+        },
+    };
+    a.checks = Checks::of(b_in, b_out, &a);
+    a
 }
 
 /// Refinement steps at most of the low parts of a factored answer.
@@ -103,14 +226,14 @@ pub(super) fn split_direct(
         if cg::profiling() {
             eprintln!("flow: refinement step {} in two doubles", step + 1);
         }
-        let before = (a.rel_x, a.rel_psi);
+        let before = a.checks.rel;
         f.correct_pair(&a.r_x, &a.r_psi, &mut a.lo.0, &mut a.lo.1);
         st.residual_split(&a.x, &a.lo.0, b_in, &mut a.r_x);
         st.residual_split(&a.psi, &a.lo.1, b_out, &mut a.r_psi);
-        a.rel_x = relative(&a.r_x, b_in);
-        a.rel_psi = relative(&a.r_psi, b_out);
-        let halved = a.rel_x <= 0.5 * before.0 || a.rel_psi <= 0.5 * before.1;
-        if trusted(b_in, b_out, &a, trust) || !halved {
+        a.checks = Checks::of(b_in, b_out, &a);
+        let after = a.checks.rel;
+        let halved = after.0 <= 0.5 * before.0 || after.1 <= 0.5 * before.1;
+        if trusted(&a, trust) || !halved {
             break;
         }
     }
@@ -130,33 +253,6 @@ pub(super) fn direct_trust(tol: f64) -> f64 {
     tol.max(DIRECT_TRUST)
 }
 
-/// `w · v` for a vector carried in one double (`lo` empty) or two (`v + lo`).
-fn dot_split(w: &[f64], v: &[f64], lo: &[f64]) -> f64 {
-    if lo.is_empty() {
-        cg::dot(w, v)
-    } else {
-        cg::dot(w, v) + cg::dot(w, lo)
-    }
-}
-
-/// The two rates `Q_out = b_out · φ`, `Q_in = b_in · ψ` and their first-order errors relative
-/// to them, `|ψ · (b_in − A φ)| / Q_out` and `|φ · (b_out − A ψ)| / Q_in` (the errors infinite
-/// when a rate is not positive and finite).
-pub(super) fn rate_errors(
-    b_in: &[f64],
-    b_out: &[f64],
-    a: &DirectAnswer,
-) -> ((f64, f64), (f64, f64)) {
-    let (xlo, psilo) = (&a.lo.0, &a.lo.1);
-    let (q_out, q_in) = (dot_split(b_out, &a.x, xlo), dot_split(b_in, &a.psi, psilo));
-    if !(q_out.is_finite() && q_in.is_finite() && q_out > 0.0 && q_in > 0.0) {
-        return ((q_out, q_in), (f64::INFINITY, f64::INFINITY));
-    }
-    let e_out = dot_split(&a.r_x, &a.psi, psilo).abs() / q_out;
-    let e_in = dot_split(&a.r_psi, &a.x, xlo).abs() / q_in;
-    ((q_out, q_in), (e_out, e_in))
-}
-
 /// Whether the refined factor's `φ` (inlet at 1) and `ψ` (outlet at 1), with their low parts
 /// when split, can be returned: both rates positive and finite, every pressure in `[0, 1]`
 /// (the maximum principle) to round-off, the first-order errors of the rates from the exact
@@ -165,24 +261,15 @@ pub(super) fn rate_errors(
 /// and the rates agreeing to [`FLUX_AGREEMENT`]. The factor of the rounded matrix fails this
 /// when a region is joined to the rest only through faces below `ε` of its own
 /// (conductances spanning some sixteen decades or more).
-pub(super) fn trusted(b_in: &[f64], b_out: &[f64], a: &DirectAnswer, trust: f64) -> bool {
-    let ((q_out, q_in), (e_out, e_in)) = rate_errors(b_in, b_out, a);
-    if !(e_out.is_finite() && e_in.is_finite() && rates_agree(q_in, q_out)) {
-        return false;
-    }
-    let (x, psi) = (&a.x, &a.psi);
-    let (xlo, psilo) = (&a.lo.0, &a.lo.1);
-    let split = !xlo.is_empty();
-    let in_range = |v: &[f64], lo: &[f64]| {
-        v.par_iter().enumerate().all(|(k, &t)| {
-            let t = if split { t + lo[k] } else { t };
-            (-1e-12..=1.0 + 1e-12).contains(&t)
-        })
-    };
-    if !(in_range(x, xlo) && in_range(psi, psilo)) {
-        return false;
-    }
-    e_out <= trust && e_in <= trust
+pub(super) fn trusted(a: &DirectAnswer, trust: f64) -> bool {
+    let c = &a.checks;
+    let ((q_out, q_in), (e_out, e_in)) = (c.rates, c.errors);
+    e_out.is_finite()
+        && e_in.is_finite()
+        && rates_agree(q_in, q_out)
+        && c.in_range
+        && e_out <= trust
+        && e_in <= trust
 }
 
 /// `φ`, `ψ`, the larger relative residual, and the low parts of `φ` and `ψ`.
