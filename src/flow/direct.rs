@@ -106,6 +106,33 @@ impl Analysis {
     }
 }
 
+/// `x[cells[q]] = value(q)` (or `+=` with `add`) for every unknown `q` whose value is
+/// `Some`, in parallel over fixed chunks of unknowns: `cells` is increasing, so each chunk
+/// writes its own range of `x`.
+fn scatter(x: &mut [f64], cells: &[usize], value: impl Fn(usize) -> Option<f64> + Sync, add: bool) {
+    use rayon::prelude::*;
+    const CHUNK: usize = 1 << 13;
+    let mut pieces = Vec::with_capacity(cells.len().div_ceil(CHUNK));
+    let (mut rest, mut offset) = (x, 0);
+    for q0 in (CHUNK..cells.len()).step_by(CHUNK) {
+        let (piece, tail) = rest.split_at_mut(cells[q0] - offset);
+        pieces.push((piece, offset));
+        (rest, offset) = (tail, cells[q0]);
+    }
+    pieces.push((rest, offset));
+    pieces
+        .into_par_iter()
+        .enumerate()
+        .for_each(|(t, (piece, offset))| {
+            for q in t * CHUNK..cells.len().min((t + 1) * CHUNK) {
+                if let Some(v) = value(q) {
+                    let e = &mut piece[cells[q] - offset];
+                    *e = if add { *e + v } else { v };
+                }
+            }
+        });
+}
+
 /// A kept [`Analysis`] is used for an operator with at least this fraction of its unknowns
 /// (fewer: the factor on it costs more than a new analysis and a smaller factor).
 pub const REUSE_FRACTION: f64 = 0.95;
@@ -117,8 +144,8 @@ pub struct Factor {
     /// (`None`: all are).
     live: Option<Vec<bool>>,
     numeric: Numeric,
-    /// Two columns, one after the other: in the factor's order ([`supernodal_solve`]), or by
-    /// unknown for a factor in halves.
+    /// Two columns, one after the other, in the factor's order ([`supernodal_solve`]); empty
+    /// for a factor in halves.
     work: Vec<f64>,
     /// Whether the analysis was a kept one.
     reused: bool,
@@ -383,7 +410,11 @@ impl Factor {
             );
         }
         Ok(Factor {
-            work: vec![0.0; 2 * m],
+            // A factor in halves keeps its own (by side).
+            work: match numeric {
+                Numeric::Whole { .. } => vec![0.0; 2 * m],
+                Numeric::Halves(_) => Vec::new(),
+            },
             analysis,
             live,
             numeric,
@@ -426,24 +457,14 @@ impl Factor {
         };
         let symbolic = match (&an.structure, &mut self.numeric) {
             (Structure::Halves(h), Numeric::Halves(f)) => {
-                // By unknown in `work`, solved in place, two columns at once (a second of
-                // zeros with one).
-                let (w0, w1) = self.work.split_at_mut(m);
-                for (c, w) in [&mut *w0, &mut *w1].into_iter().enumerate() {
-                    for (q, v) in w.iter_mut().enumerate() {
-                        *v = match cols.get(c) {
-                            Some(col) if live(q) => col.0[cells[q]],
-                            _ => 0.0,
-                        };
-                    }
-                }
-                f.solve(h, [&mut *w0, &mut *w1]);
-                for (c, x) in [&*w0, &*w1].into_iter().enumerate().take(cols.len()) {
-                    for (q, &v) in x.iter().enumerate() {
-                        if live(q) {
-                            set(&mut cols[c].1[cells[q]], v);
-                        }
-                    }
+                // Two columns at once (a second of zeros with one), each side gathering its
+                // right-hand side from the cells; the answer written back in parallel.
+                let sol = f.solve(h, |q, c| match cols.get(c) {
+                    Some(col) if live(q) => col.0[cells[q]],
+                    _ => 0.0,
+                });
+                for (c, col) in cols.iter_mut().enumerate() {
+                    scatter(col.1, cells, |q| live(q).then(|| sol.value(q, c)), add);
                 }
                 return;
             }

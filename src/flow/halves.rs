@@ -70,13 +70,43 @@ pub struct Analysis {
     sides: [SideAnalysis; 2],
     /// Unknowns of the separator.
     k: usize,
+    /// Each unknown's position in the elimination order `[A, B, S]` (the order's inverse):
+    /// where a solve's answer for it is ([`Solved::value`]).
+    place: Vec<u32>,
 }
 
 /// The numeric factor in halves: each side's supernodal values and the separator's dense
-/// factor `L_SS` (lower triangle).
+/// factor `L_SS` (lower triangle), with each side's two interleaved columns of a solve
+/// (made at the first, reused by the next: a refinement step's solve faults no new pages).
 pub struct Factor {
     values: [Vec<f64>; 2],
     ls: Mat<f64>,
+    work: [Vec<f64>; 2],
+    /// The separator's values of the last solve (`k × 2`).
+    u: Mat<f64>,
+}
+
+/// The answer of [`Factor::solve`], read by unknown.
+pub struct Solved<'a> {
+    an: &'a Analysis,
+    work: &'a [Vec<f64>; 2],
+    u: &'a Mat<f64>,
+}
+
+impl Solved<'_> {
+    /// Column `c`'s value at unknown `q` (an index into the analysis's cells).
+    #[inline]
+    pub fn value(&self, q: usize, c: usize) -> f64 {
+        let p = self.an.place[q] as usize;
+        let (oa, ob) = (self.an.sides[0].own, self.an.sides[1].own);
+        if p < oa {
+            self.work[0][2 * p + c]
+        } else if p < oa + ob {
+            self.work[1][2 * (p - oa) + c]
+        } else {
+            self.u[(p - oa - ob, c)]
+        }
+    }
 }
 
 /// A side's matrix: lower triangle by columns in elimination order.
@@ -123,12 +153,22 @@ impl Analysis {
                 a,
             ))
         };
-        let (a, b) = rayon::join(|| side(&order[..na]), || side(&order[na..na + nb]));
+        let ((a, b), place) = rayon::join(
+            || rayon::join(|| side(&order[..na]), || side(&order[na..na + nb])),
+            || {
+                let mut place = vec![0u32; order.len()];
+                for (p, &q) in order.iter().enumerate() {
+                    place[q] = p as u32;
+                }
+                place
+            },
+        );
         let ((sa, ma), (sb, mb)) = (a?, b?);
         Ok((
             Analysis {
                 sides: [sa, sb],
                 k: sep.len(),
+                place,
             },
             [ma, mb],
         ))
@@ -311,34 +351,47 @@ impl Factor {
         Ok(Factor {
             values: [va, vb],
             ls: s,
+            work: [Vec::new(), Vec::new()],
+            u: Mat::zeros(k, 2),
         })
     }
 
-    /// `A x = b` for the two columns of `cols` (by unknown, in the analysis's cells'
-    /// order), overwritten with `x`: on each side both columns at once, interleaved
-    /// (one pass over the side's factor each way).
-    pub fn solve(&self, an: &Analysis, cols: [&mut [f64]; 2]) {
+    /// `A x = b` for two columns whose right-hand side at unknown `q` (an index into the
+    /// analysis's cells) is `b(q, c)`: on each side both columns at once, interleaved (one
+    /// pass over the side's factor each way), each side gathering its own right-hand side.
+    pub fn solve<'a>(
+        &'a mut self,
+        an: &'a Analysis,
+        b: impl Fn(usize, usize) -> f64 + Sync,
+    ) -> Solved<'a> {
         let k = an.k;
-        let b: [&[f64]; 2] = [&*cols[0], &*cols[1]];
-        let forward = |sa: &SideAnalysis, values: &[f64], cols: [&[f64]; 2]| -> Vec<f64> {
-            let mut w = vec![0.0; 2 * sa.unknowns.len()];
-            for (p, &q) in sa.unknowns[..sa.own].iter().enumerate() {
-                w[2 * p] = cols[0][q];
-                w[2 * p + 1] = cols[1][q];
+        let forward = |sa: &SideAnalysis, values: &[f64], w: &mut Vec<f64>| {
+            let len = 2 * sa.unknowns.len();
+            if w.len() != len {
+                *w = vec![0.0; len];
             }
-            supernodal_forward::<2>(supernodal(&sa.symbolic), values, &mut w, sa.own);
-            w
+            for (p, &q) in sa.unknowns[..sa.own].iter().enumerate() {
+                w[2 * p] = b(q, 0);
+                w[2 * p + 1] = b(q, 1);
+            }
+            // The separator's rows gather the sides' updates.
+            w[2 * sa.own..].iter_mut().for_each(|v| *v = 0.0);
+            supernodal_forward::<2>(supernodal(&sa.symbolic), values, w, sa.own);
         };
-        let (mut wa, mut wb) = rayon::join(
-            || forward(&an.sides[0], &self.values[0], b),
-            || forward(&an.sides[1], &self.values[1], b),
+        let [wa, wb] = &mut self.work;
+        rayon::join(
+            || forward(&an.sides[0], &self.values[0], wa),
+            || forward(&an.sides[1], &self.values[1], wb),
         );
         // The separator's right-hand side: `b_S − L_SA y_A − L_SB y_B`.
         let sep = &an.sides[0].unknowns[an.sides[0].own..];
         let (oa, ob) = (an.sides[0].own, an.sides[1].own);
-        let mut u = Mat::<f64>::from_fn(k, 2, |i, c| {
-            b[c][sep[i]] + wa[2 * (oa + i) + c] + wb[2 * (ob + i) + c]
-        });
+        let u = &mut self.u;
+        for c in 0..2 {
+            for (i, &q) in sep.iter().enumerate() {
+                u[(i, c)] = b(q, c) + wa[2 * (oa + i) + c] + wb[2 * (ob + i) + c];
+            }
+        }
         solve_lower_triangular_in_place(self.ls.as_ref(), u.as_mut(), Par::Seq);
         solve_upper_triangular_in_place(self.ls.transpose(), u.as_mut(), Par::Seq);
         for c in 0..2 {
@@ -351,18 +404,13 @@ impl Factor {
             supernodal_backward::<2>(supernodal(&sa.symbolic), values, w, sa.own);
         };
         rayon::join(
-            || backward(&an.sides[0], &self.values[0], &mut wa),
-            || backward(&an.sides[1], &self.values[1], &mut wb),
+            || backward(&an.sides[0], &self.values[0], wa),
+            || backward(&an.sides[1], &self.values[1], wb),
         );
-        for (c, x) in cols.into_iter().enumerate() {
-            for (sa, w) in an.sides.iter().zip([&wa, &wb]) {
-                for (p, &q) in sa.unknowns[..sa.own].iter().enumerate() {
-                    x[q] = w[2 * p + c];
-                }
-            }
-            for (i, &q) in sep.iter().enumerate() {
-                x[q] = u[(i, c)];
-            }
+        Solved {
+            an,
+            work: &self.work,
+            u: &self.u,
         }
     }
 }
@@ -401,15 +449,26 @@ mod tests {
             let (order, cut) = crate::flow::order::nd_order(&st, &index, m);
             let cut = cut.expect("a top cut");
             let (an, mats) = Analysis::new(&st, &index, &cells, &order, cut).unwrap();
-            let f = Factor::new(&an, mats).unwrap();
+            let mut f = Factor::new(&an, mats).unwrap();
             let b2: Vec<f64> = crate::flow::tests::lcg(6, n)
                 .iter()
                 .zip(&st.active)
                 .map(|(&v, &on)| if on { v - 0.5 } else { 0.0 })
                 .collect();
-            let mut cols: [Vec<f64>; 2] = [&b1, &b2].map(|b| cells.iter().map(|&k| b[k]).collect());
-            let [c0, c1] = &mut cols;
-            f.solve(&an, [c0, c1]);
+            let by_unknown = |b: &[f64]| -> Vec<f64> { cells.iter().map(|&k| b[k]).collect() };
+            // A first solve of other columns: the second's answer must not depend on what
+            // the reused buffers held.
+            let other = [by_unknown(&b2), vec![1.0; m]];
+            f.solve(&an, |q, c| other[c][q]);
+            let cols = [by_unknown(&b1), by_unknown(&b2)];
+            let sol = f.solve(&an, |q, c| cols[c][q]);
+            let xs = [0, 1].map(|c| {
+                let mut x = vec![0.0; n];
+                for (q, &k) in cells.iter().enumerate() {
+                    x[k] = sol.value(q, c);
+                }
+                x
+            });
             let mut whole = direct::Factor::new(&st, None).unwrap();
             let (mut w1, mut w2) = (vec![0.0; n], vec![0.0; n]);
             whole.solve_pair(&b1, &b2, &mut w1, &mut w2);
@@ -418,12 +477,8 @@ mod tests {
                 st.residual_compensated(x, b, &mut r);
                 cg::dot(&r, &r).sqrt() / cg::dot(b, b).sqrt()
             };
-            for (col, (b, w)) in cols.iter().zip([(&b1, &w1), (&b2, &w2)]) {
-                let mut x = vec![0.0; n];
-                for (q, &k) in cells.iter().enumerate() {
-                    x[k] = col[q];
-                }
-                let (halves, whole) = (rel(&x, b), rel(w, b));
+            for (x, (b, w)) in xs.iter().zip([(&b1, &w1), (&b2, &w2)]) {
+                let (halves, whole) = (rel(x, b), rel(w, b));
                 assert!(
                     halves < 1e-6 && halves <= 10.0 * whole + 1e-15,
                     "periodic={periodic}: residual {halves:e} (whole factor {whole:e})"
