@@ -79,7 +79,10 @@ pub(super) fn scratch_bytes(symbolic: &SymbolicCholesky<usize>, par: Par) -> u64
 
 /// The lower triangle of `P A Pᵀ` from `a`'s (`inv[i]`: the position of unknown `i` in the
 /// factor's order), by columns (rows unsorted).
-fn permuted_lower(a: &SparseColMat<usize, f64>, inv: &[usize]) -> SparseColMat<usize, f64> {
+pub(super) fn permuted_lower(
+    a: &SparseColMat<usize, f64>,
+    inv: &[usize],
+) -> SparseColMat<usize, f64> {
     let m = a.nrows();
     let (ptr, rows, vals) = (a.symbolic().col_ptr(), a.symbolic().row_idx(), a.val());
     // Each stored entry's position `(row, column)` in the lower triangle of `P A Pᵀ`.

@@ -66,6 +66,37 @@ pub(super) fn supernodal_forward<const K: usize>(
     w: &mut [f64],
     stop: usize,
 ) {
+    #[cfg(target_arch = "x86_64")]
+    if super::wide::avx2() {
+        // SAFETY: the CPU has AVX2.
+        return unsafe { supernodal_forward_avx2::<K>(sn, values, w, stop) };
+    }
+    supernodal_forward_plain::<K>(sn, values, w, stop)
+}
+
+/// [`supernodal_forward`] compiled with AVX2 (the same operations in the same order).
+///
+/// # Safety
+///
+/// The CPU has AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn supernodal_forward_avx2<const K: usize>(
+    sn: &SymbolicSupernodalCholesky<usize>,
+    values: &[f64],
+    w: &mut [f64],
+    stop: usize,
+) {
+    supernodal_forward_plain::<K>(sn, values, w, stop)
+}
+
+#[inline(always)]
+pub(super) fn supernodal_forward_plain<const K: usize>(
+    sn: &SymbolicSupernodalCholesky<usize>,
+    values: &[f64],
+    w: &mut [f64],
+    stop: usize,
+) {
     for s in 0..sn.n_supernodes() {
         let node = Supernode::of(sn, values, s);
         let (start, ncols, pattern) = (node.start, node.ncols, node.pattern);
@@ -100,6 +131,37 @@ pub(super) fn supernodal_forward<const K: usize>(
 /// The backward half of [`supernodal_solve`] for `K` interleaved columns, on the factor's
 /// columns before `stop`, the values of `w` from `stop` on taken as solved (a separator's).
 pub(super) fn supernodal_backward<const K: usize>(
+    sn: &SymbolicSupernodalCholesky<usize>,
+    values: &[f64],
+    w: &mut [f64],
+    stop: usize,
+) {
+    #[cfg(target_arch = "x86_64")]
+    if super::wide::avx2() {
+        // SAFETY: the CPU has AVX2.
+        return unsafe { supernodal_backward_avx2::<K>(sn, values, w, stop) };
+    }
+    supernodal_backward_plain::<K>(sn, values, w, stop)
+}
+
+/// [`supernodal_backward`] compiled with AVX2 (the same operations in the same order).
+///
+/// # Safety
+///
+/// The CPU has AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn supernodal_backward_avx2<const K: usize>(
+    sn: &SymbolicSupernodalCholesky<usize>,
+    values: &[f64],
+    w: &mut [f64],
+    stop: usize,
+) {
+    supernodal_backward_plain::<K>(sn, values, w, stop)
+}
+
+#[inline(always)]
+pub(super) fn supernodal_backward_plain<const K: usize>(
     sn: &SymbolicSupernodalCholesky<usize>,
     values: &[f64],
     w: &mut [f64],

@@ -18,9 +18,12 @@
 //!    supernode that holds that column, through the rows' positions in that block.
 //!
 //! Supernodes of [`DENSE`] columns and more are factored and multiplied by faer's dense
-//! kernels. The others' arithmetic is plain code for the baseline instruction set, the same
-//! bits on every x86-64 CPU; all of it is sequential, so the values do not depend on the
-//! thread count.
+//! kernels. The others' arithmetic is plain code, compiled twice on x86-64: for the baseline
+//! instruction set and with AVX2 (256-bit vectors, taken when the CPU has them). Neither
+//! fuses a multiply and an add (Rust never contracts them), so both give the same bits on
+//! every x86-64 CPU (tested); the AVX2 build takes about a tenth less time (the 513² contact
+//! gap of the benchmarks, docs/flow.md). All of it is sequential, so the values do not
+//! depend on the thread count.
 
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::llt::factor::{cholesky_in_place, cholesky_in_place_scratch, LltError};
@@ -35,6 +38,36 @@ use faer::{Accum, MatMut, MatRef, Par};
 /// column `j` is not positive and finite (`a` is not positive definite to working
 /// precision).
 pub(super) fn factor_values(
+    sn: &SymbolicSupernodalCholesky<usize>,
+    a: SparseColMatRef<'_, usize, f64>,
+    values: &mut [f64],
+) -> Result<(), usize> {
+    #[cfg(target_arch = "x86_64")]
+    if super::wide::avx2() {
+        // SAFETY: the CPU has AVX2.
+        return unsafe { factor_values_avx2(sn, a, values) };
+    }
+    factor_values_plain(sn, a, values)
+}
+
+/// [`factor_values`] compiled with AVX2 (the same operations in the same order).
+///
+/// # Safety
+///
+/// The CPU has AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn factor_values_avx2(
+    sn: &SymbolicSupernodalCholesky<usize>,
+    a: SparseColMatRef<'_, usize, f64>,
+    values: &mut [f64],
+) -> Result<(), usize> {
+    factor_values_plain(sn, a, values)
+}
+
+/// [`factor_values`] for the instruction set it is inlined into.
+#[inline(always)]
+pub(super) fn factor_values_plain(
     sn: &SymbolicSupernodalCholesky<usize>,
     a: SparseColMatRef<'_, usize, f64>,
     values: &mut [f64],
@@ -153,6 +186,7 @@ const TILE: usize = 4;
 /// The pattern's `m` rows of a factored block (`nr` rows, `nc` columns, column-major, the
 /// pattern's rows from `nc`) into `packed` by tiles of [`TILE`] rows: tile `t`'s column `c`
 /// at `(t · nc + c) · TILE`, rows past `m` zero.
+#[inline(always)]
 fn pack(packed: &mut Vec<f64>, block: &[f64], nr: usize, nc: usize, m4: usize) {
     packed.clear();
     packed.resize(m4 * nc, 0.0);
@@ -183,6 +217,7 @@ fn tile(packed: &[f64], ncd: usize, i0: usize, q0: usize) -> [[f64; TILE]; TILE]
 
 /// `U = X Xᵀ` in tiles ([`tile`]) of the packed rows `X` (`m4` rows, `nc` columns): its
 /// lower tiles into `update` (`m4 × m4`, column-major).
+#[inline(always)]
 fn products(update: &mut Vec<f64>, packed: &[f64], nc: usize, m4: usize) {
     update.clear();
     update.resize(m4 * m4, 0.0);
@@ -198,6 +233,7 @@ fn products(update: &mut Vec<f64>, packed: &[f64], nc: usize, m4: usize) {
 
 /// The supernode's block (`nr × nc`, column-major, updated) factored in place column by
 /// column; `Err(c)`: the pivot of column `c` is not positive and finite.
+#[inline(always)]
 fn factor_block(block: &mut [f64], nr: usize, nc: usize) -> Result<(), usize> {
     if nc >= DENSE {
         return factor_block_dense(block, nr, nc);

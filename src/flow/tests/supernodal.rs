@@ -161,3 +161,46 @@ fn the_supernodal_factor_refuses_a_matrix_that_is_not_positive_definite() {
         assert!(format!("{err}").contains("not positive"), "{err}");
     }
 }
+
+/// The factor and the substitutions give the same bits whichever build of their loops runs
+/// (the baseline instruction set, or AVX2 on a CPU that has it): with a fill-reducing order,
+/// past the dense threshold, and in grid order.
+#[test]
+fn the_wide_and_plain_builds_give_the_same_bits() {
+    use crate::flow::llt::permuted_lower;
+    use crate::flow::substitution::{
+        supernodal_backward, supernodal_backward_plain, supernodal_forward,
+        supernodal_forward_plain,
+    };
+    use crate::flow::supernodal::{factor_values, factor_values_plain};
+    for (ny, nx, amd) in [(24, 31, true), (40, 40, false), (64, 64, true)] {
+        let a = grid_operator(ny, nx, 11 + ny as u64, None);
+        let symbolic = analysis(&a, amd);
+        let SymbolicCholeskyRaw::Supernodal(sn) = symbolic.raw() else {
+            panic!("a supernodal analysis")
+        };
+        let a = match symbolic.perm() {
+            Some(p) => permuted_lower(&a, p.arrays().1),
+            None => a,
+        };
+        let (mut wide, mut plain) = (vec![0.0; sn.len_val()], vec![0.0; sn.len_val()]);
+        factor_values(sn, a.as_ref(), &mut wide).unwrap();
+        factor_values_plain(sn, a.as_ref(), &mut plain).unwrap();
+        let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&wide), bits(&plain), "{ny}×{nx}: factor");
+        let n = ny * nx;
+        let b = lcg(9, 2 * n);
+        let (mut w1, mut p1) = (b[..n].to_vec(), b[..n].to_vec());
+        supernodal_forward::<1>(sn, &wide, &mut w1, n);
+        supernodal_forward_plain::<1>(sn, &wide, &mut p1, n);
+        supernodal_backward::<1>(sn, &wide, &mut w1, n);
+        supernodal_backward_plain::<1>(sn, &wide, &mut p1, n);
+        assert_eq!(bits(&w1), bits(&p1), "{ny}×{nx}: one column");
+        let (mut w2, mut p2) = (b.clone(), b.clone());
+        supernodal_forward::<2>(sn, &wide, &mut w2, n);
+        supernodal_forward_plain::<2>(sn, &wide, &mut p2, n);
+        supernodal_backward::<2>(sn, &wide, &mut w2, n);
+        supernodal_backward_plain::<2>(sn, &wide, &mut p2, n);
+        assert_eq!(bits(&w2), bits(&p2), "{ny}×{nx}: two columns");
+    }
+}
