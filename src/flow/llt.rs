@@ -32,7 +32,7 @@ pub(super) fn llt_values(
         // and a zero page first read there is faulted again where it is written.
         let mut values = crate::alloc::try_filled(len, 0.0, "the factor")
             .map_err(|_| failed("out of memory"))?;
-        let permuted = symbolic.perm().map(|p| permuted_lower(a, p.arrays().1));
+        let permuted = permutation(symbolic).map(|inv| permuted_lower(a, inv));
         let a = permuted.as_ref().unwrap_or(a);
         factor_values(sn, a.as_ref(), &mut values)
             .map_err(|j| failed(format!("the pivot of column {j} is not positive")))?;
@@ -64,7 +64,7 @@ pub(super) fn llt_values(
 pub(super) fn scratch_bytes(symbolic: &SymbolicCholesky<usize>, par: Par) -> u64 {
     match symbolic.raw() {
         SymbolicCholeskyRaw::Supernodal(sn) => {
-            let permuted = if symbolic.perm().is_some() {
+            let permuted = if permutation(symbolic).is_some() {
                 8 * (8 * sn.nrows() as u64 + 1)
             } else {
                 0
@@ -75,6 +75,16 @@ pub(super) fn scratch_bytes(symbolic: &SymbolicCholesky<usize>, par: Par) -> u64
             .factorize_numeric_llt_scratch::<f64>(par, Default::default())
             .size_bytes() as u64,
     }
+}
+
+/// The analysis's order (`inv[i]`: the position of unknown `i`) when it is not the
+/// identity: a custom order that is (a factor in halves, whose sides' matrices are built in
+/// elimination order) needs no permuted copy of the operator.
+fn permutation(symbolic: &SymbolicCholesky<usize>) -> Option<&[usize]> {
+    symbolic
+        .perm()
+        .filter(|p| !p.arrays().0.iter().enumerate().all(|(i, &q)| i == q))
+        .map(|p| p.arrays().1)
 }
 
 /// The lower triangle of `P A Pᵀ` from `a`'s (`inv[i]`: the position of unknown `i` in the
