@@ -66,30 +66,13 @@ pub(super) fn supernodal_forward<const K: usize>(
     w: &mut [f64],
     stop: usize,
 ) {
-    #[cfg(target_arch = "x86_64")]
-    if super::wide::avx2() {
-        // SAFETY: the CPU has AVX2.
-        return unsafe { supernodal_forward_avx2::<K>(sn, values, w, stop) };
-    }
-    supernodal_forward_plain::<K>(sn, values, w, stop)
+    super::wide::run(
+        #[inline(always)]
+        || supernodal_forward_plain::<K>(sn, values, w, stop),
+    )
 }
 
-/// [`supernodal_forward`] compiled with AVX2 (the same operations in the same order).
-///
-/// # Safety
-///
-/// The CPU has AVX2.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-unsafe fn supernodal_forward_avx2<const K: usize>(
-    sn: &SymbolicSupernodalCholesky<usize>,
-    values: &[f64],
-    w: &mut [f64],
-    stop: usize,
-) {
-    supernodal_forward_plain::<K>(sn, values, w, stop)
-}
-
+/// [`supernodal_forward`] in the instruction set of the function it is inlined into.
 #[inline(always)]
 pub(super) fn supernodal_forward_plain<const K: usize>(
     sn: &SymbolicSupernodalCholesky<usize>,
@@ -136,30 +119,13 @@ pub(super) fn supernodal_backward<const K: usize>(
     w: &mut [f64],
     stop: usize,
 ) {
-    #[cfg(target_arch = "x86_64")]
-    if super::wide::avx2() {
-        // SAFETY: the CPU has AVX2.
-        return unsafe { supernodal_backward_avx2::<K>(sn, values, w, stop) };
-    }
-    supernodal_backward_plain::<K>(sn, values, w, stop)
+    super::wide::run(
+        #[inline(always)]
+        || supernodal_backward_plain::<K>(sn, values, w, stop),
+    )
 }
 
-/// [`supernodal_backward`] compiled with AVX2 (the same operations in the same order).
-///
-/// # Safety
-///
-/// The CPU has AVX2.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-unsafe fn supernodal_backward_avx2<const K: usize>(
-    sn: &SymbolicSupernodalCholesky<usize>,
-    values: &[f64],
-    w: &mut [f64],
-    stop: usize,
-) {
-    supernodal_backward_plain::<K>(sn, values, w, stop)
-}
-
+/// [`supernodal_backward`] in the instruction set of the function it is inlined into.
 #[inline(always)]
 pub(super) fn supernodal_backward_plain<const K: usize>(
     sn: &SymbolicSupernodalCholesky<usize>,

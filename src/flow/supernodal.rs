@@ -42,27 +42,10 @@ pub(super) fn factor_values(
     a: SparseColMatRef<'_, usize, f64>,
     values: &mut [f64],
 ) -> Result<(), usize> {
-    #[cfg(target_arch = "x86_64")]
-    if super::wide::avx2() {
-        // SAFETY: the CPU has AVX2.
-        return unsafe { factor_values_avx2(sn, a, values) };
-    }
-    factor_values_plain(sn, a, values)
-}
-
-/// [`factor_values`] compiled with AVX2 (the same operations in the same order).
-///
-/// # Safety
-///
-/// The CPU has AVX2.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-unsafe fn factor_values_avx2(
-    sn: &SymbolicSupernodalCholesky<usize>,
-    a: SparseColMatRef<'_, usize, f64>,
-    values: &mut [f64],
-) -> Result<(), usize> {
-    factor_values_plain(sn, a, values)
+    super::wide::run(
+        #[inline(always)]
+        || factor_values_plain(sn, a, values),
+    )
 }
 
 /// [`factor_values`] for the instruction set it is inlined into.
