@@ -43,13 +43,18 @@ impl DirectAnswer {
     pub(super) fn rate_errors(&self) -> ((f64, f64), (f64, f64)) {
         (self.checks.rates, self.checks.errors)
     }
+
+    /// Recomputes the checks after `x`, `psi`, their low parts or residuals changed.
+    fn recheck(&mut self, b_in: &[f64], b_out: &[f64]) {
+        self.checks = Checks::of(b_in, b_out, self);
+    }
 }
 
 /// What the checks of a factored answer read, from one pass over its vectors
 /// ([`Checks::of`]): the relative residuals `‖r‖₂ / ‖b‖₂` of `φ` and `ψ`, the rates and
 /// their first-order errors ([`DirectAnswer::rate_errors`]), and whether every pressure is
 /// in `[0, 1]` to round-off (the maximum principle).
-#[derive(Clone, Copy)]
+#[derive(Clone, Copy, Default)]
 struct Checks {
     rel: (f64, f64),
     rates: (f64, f64),
@@ -70,7 +75,7 @@ struct Sums {
 }
 
 impl Checks {
-    /// The checks of `a` (its `checks` ignored) for the right-hand sides `b_in` and `b_out`:
+    /// The checks of `a` (its own `checks` not read) for the right-hand sides `b_in` and `b_out`:
     /// every vector read once, in fixed chunks of [`cg::CHUNK`] summed in chunk order (the
     /// same bits for any number of threads). The sums of a vector carried in two doubles
     /// add its high and low parts' sums, as two separate dot products would.
@@ -190,14 +195,9 @@ pub(super) fn solve_direct(
         r_x,
         r_psi,
         lo: (Vec::new(), Vec::new()),
-        checks: Checks {
-            rel: (0.0, 0.0),
-            rates: (0.0, 0.0),
-            errors: (0.0, 0.0),
-            in_range: false,
-        },
+        checks: Checks::default(),
     };
-    a.checks = Checks::of(b_in, b_out, &a);
+    a.recheck(b_in, b_out);
     a
 }
 
@@ -230,7 +230,7 @@ pub(super) fn split_direct(
         f.correct_pair(&a.r_x, &a.r_psi, &mut a.lo.0, &mut a.lo.1);
         st.residual_split(&a.x, &a.lo.0, b_in, &mut a.r_x);
         st.residual_split(&a.psi, &a.lo.1, b_out, &mut a.r_psi);
-        a.checks = Checks::of(b_in, b_out, &a);
+        a.recheck(b_in, b_out);
         let after = a.checks.rel;
         let halved = after.0 <= 0.5 * before.0 || after.1 <= 0.5 * before.1;
         if trusted(&a, trust) || !halved {
