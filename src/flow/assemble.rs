@@ -337,7 +337,10 @@ impl Stencil {
     }
 
     /// Row `i` of [`Stencil::residual_of_parts`], products split by fused multiply-add
-    /// (`FUSED`) or Dekker's splitting ([`compensated`]).
+    /// (`FUSED`) or Dekker's splitting ([`compensated`]). The cells with four faces (not on
+    /// the first or last row or column) are summed several at a time, in vector lanes
+    /// ([`Stencil::residual_interior`]); each lane does the same operations in the same order
+    /// as [`Stencil::residual_cell`] does for its cell, so the bits are the same.
     #[inline(always)]
     fn residual_row<const FUSED: bool>(
         &self,
@@ -346,25 +349,108 @@ impl Stencil {
         b: &[f64],
         rrow: &mut [f64],
     ) {
-        let (hi, lo) = (parts[0], parts.get(1).copied());
-        for (j, rv) in rrow.iter_mut().enumerate() {
-            let k = i * self.nx + j;
-            if !self.active[k] {
-                *rv = b[k] - self.d[k] * parts.iter().map(|x| x[k]).sum::<f64>();
-                continue;
+        let nx = self.nx;
+        let interior = i > 0 && i + 1 < self.ny && nx > 2;
+        let lanes = interior
+            && match *parts {
+                [hi] => self.residual_interior::<FUSED, false>(i, hi, hi, b, rrow),
+                [hi, lo] => self.residual_interior::<FUSED, true>(i, hi, lo, b, rrow),
+                _ => false,
+            };
+        if lanes {
+            for j in [0, nx - 1] {
+                rrow[j] = self.residual_cell::<FUSED>(i, j, parts, b);
             }
-            let mut acc = Compensated::<FUSED>::new(b[k]);
-            acc.add_product(-self.dir[k], hi[k]);
-            if let Some(lo) = lo {
-                acc.err -= self.dir[k] * lo[k];
+        } else {
+            // An edge row, or a product that left the fused multiply-add's exact range.
+            for (j, r) in rrow.iter_mut().enumerate() {
+                *r = self.residual_cell::<FUSED>(i, j, parts, b);
             }
-            for (l, c) in self.faces_at(i, j) {
-                if c > 0.0 {
-                    acc.add_face(c, hi[l], hi[k], lo.map(|lo| lo[l] - lo[k]));
-                }
-            }
-            *rv = acc.value();
         }
+    }
+
+    /// Cell `(i, j)` of [`Stencil::residual_of_parts`].
+    #[inline(always)]
+    fn residual_cell<const FUSED: bool>(
+        &self,
+        i: usize,
+        j: usize,
+        parts: &[&[f64]],
+        b: &[f64],
+    ) -> f64 {
+        let (hi, lo) = (parts[0], parts.get(1).copied());
+        let k = i * self.nx + j;
+        let x = hi[k] + lo.map_or(0.0, |lo| lo[k]);
+        if !self.active[k] {
+            return b[k] - self.d[k] * x;
+        }
+        let mut acc = Compensated::<FUSED>::new(b[k]);
+        acc.add_product(-self.dir[k], hi[k]);
+        if let Some(lo) = lo {
+            acc.err -= self.dir[k] * lo[k];
+        }
+        for (l, c) in self.faces_at(i, j) {
+            if c > 0.0 {
+                acc.add_face(c, hi[l], hi[k], lo.map(|lo| lo[l] - lo[k]));
+            }
+        }
+        acc.value()
+    }
+
+    /// Cells `1 ..= nx − 2` of interior row `i` of [`Stencil::residual_of_parts`] with
+    /// `x = hi (+ lo when LO)`, in a loop without branches: a face of conductance 0 is summed
+    /// and its result dropped (a select, not a jump) and the fused multiply-add's range is
+    /// checked for the row as a whole. `false`: some product left that range; nothing
+    /// written then is kept ([`Stencil::residual_row`] sums the row by cells).
+    #[inline(always)]
+    fn residual_interior<const FUSED: bool, const LO: bool>(
+        &self,
+        i: usize,
+        hi: &[f64],
+        lo: &[f64],
+        b: &[f64],
+        rrow: &mut [f64],
+    ) -> bool {
+        let nx = self.nx;
+        let m = nx - 2;
+        let k0 = i * nx + 1;
+        let at = window(m);
+        let (bb, dir, d) = (at(b, k0), at(&self.dir, k0), at(&self.d, k0));
+        let active = &self.active[k0..k0 + m];
+        let faces = [
+            (at(&self.e, k0), k0 + 1),
+            (at(&self.e, k0 - 1), k0 - 1),
+            (at(&self.s, k0), k0 + nx),
+            (at(&self.s, k0 - nx), k0 - nx),
+        ];
+        let (c, l) = (faces.map(|f| f.0), faces.map(|f| f.1));
+        let (hk, lk) = (at(hi, k0), at(lo, k0));
+        let (hl, ll) = (l.map(|l| at(hi, l)), l.map(|l| at(lo, l)));
+        let out = &mut rrow[1..1 + m];
+        let mut exact = true;
+        for t in 0..m {
+            let x = if LO { hk[t] + lk[t] } else { hk[t] };
+            let mut acc = Compensated::<FUSED>::new(bb[t]);
+            exact &= acc.add_product_in_range(-dir[t], hk[t]);
+            if LO {
+                acc.err -= dir[t] * lk[t];
+            }
+            for f in 0..4 {
+                let cf = c[f][t];
+                let dlo = LO.then(|| ll[f][t] - lk[t]);
+                let mut with = acc;
+                let in_range = with.add_face_in_range(cf, hl[f][t], hk[t], dlo);
+                let open = cf > 0.0;
+                exact &= in_range | !open;
+                acc = if open { with } else { acc };
+            }
+            out[t] = if active[t] {
+                acc.value()
+            } else {
+                bb[t] - d[t] * x
+            };
+        }
+        exact
     }
 
     /// [`Stencil::residual_row`] with the fused multiply-add.
@@ -376,6 +462,12 @@ impl Stencil {
     unsafe fn residual_row_fused(&self, i: usize, parts: &[&[f64]], b: &[f64], rrow: &mut [f64]) {
         self.residual_row::<true>(i, parts, b, rrow)
     }
+}
+
+/// `v[from .. from + m]`, for the equally long windows of a row's neighbours.
+#[inline(always)]
+fn window(m: usize) -> impl Fn(&[f64], usize) -> &[f64] {
+    move |v, from| &v[from..from + m]
 }
 
 /// Where a chunk of [`Stencil::residual_compensated_on`] starts: unknown `i0`, with the
@@ -487,6 +579,78 @@ mod tests {
                 st.residual_of_parts_with(false, &parts, &rhs, &mut r2);
                 let bits = |r: &[f64]| r.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
                 assert_eq!(bits(&r1), bits(&r2));
+            }
+        }
+    }
+
+    /// The rows summed in vector lanes give the bits of the same rows summed cell by cell,
+    /// with and without the fused multiply-add, in one and two doubles: on conductances of
+    /// one decade (every interior row in lanes) and over 300 decades (rows whose products
+    /// leave the fused range fall back to cells), closed faces and cells included.
+    #[test]
+    fn rows_in_lanes_give_the_bits_of_rows_by_cells() {
+        let (ny, nx) = (19, 23);
+        let n = ny * nx;
+        let u = crate::test_support::lcg(0x9e37_79b9_7f4a_7c15, 6 * n);
+        for decades in [1.0, 300.0] {
+            let c: Vec<f64> = u[..2 * n]
+                .chunks_exact(2)
+                .map(|w| {
+                    if w[0] < 0.15 {
+                        0.0
+                    } else {
+                        10f64.powf(-decades * w[1])
+                    }
+                })
+                .collect();
+            for periodic in [false, true] {
+                let (st, rhs) = fine_stencil(&c, ny, nx, periodic);
+                let hi: Vec<f64> = u[2 * n..4 * n]
+                    .chunks_exact(2)
+                    .map(|w| w[0] * 10f64.powf(-decades * w[1]))
+                    .collect();
+                let lo: Vec<f64> = hi
+                    .iter()
+                    .zip(&u[4 * n..])
+                    .map(|(v, w)| v * 1e-17 * w)
+                    .collect();
+                for fused in [false, true] {
+                    if fused && !compensated::fused() {
+                        continue;
+                    }
+                    for parts in [vec![&hi[..]], vec![&hi[..], &lo[..]]] {
+                        let mut lanes = vec![0.0; n];
+                        st.residual_of_parts_with(fused, &parts, &rhs, &mut lanes);
+                        let by_cells: Vec<f64> = (0..n)
+                            .map(|k| match fused {
+                                true => st.residual_cell::<true>(k / nx, k % nx, &parts, &rhs),
+                                false => st.residual_cell::<false>(k / nx, k % nx, &parts, &rhs),
+                            })
+                            .collect();
+                        let bits = |r: &[f64]| r.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+                        assert_eq!(
+                            bits(&lanes),
+                            bits(&by_cells),
+                            "{decades} {periodic} {fused}"
+                        );
+                        let mut row = vec![0.0; nx];
+                        let in_lanes = (1..ny - 1)
+                            .filter(|&i| match fused {
+                                true => {
+                                    st.residual_interior::<true, false>(i, &hi, &hi, &rhs, &mut row)
+                                }
+                                false => st
+                                    .residual_interior::<false, false>(i, &hi, &hi, &rhs, &mut row),
+                            })
+                            .count();
+                        // One decade: every interior row in lanes; 300 decades with
+                        // the fused multiply-add: some rows by cells.
+                        match (decades < 2.0, fused) {
+                            (true, _) | (false, false) => assert_eq!(in_lanes, ny - 2),
+                            (false, true) => assert!(in_lanes < ny - 2),
+                        }
+                    }
+                }
             }
         }
     }

@@ -9,6 +9,7 @@
 
 /// A sum carried as a double and its rounding error (Ogita, Rump & Oishi's `Dot2`), with
 /// products split by fused multiply-add (`FUSED`) or by Dekker's splitting.
+#[derive(Clone, Copy)]
 pub(super) struct Compensated<const FUSED: bool> {
     sum: f64,
     pub(super) err: f64,
@@ -41,6 +42,42 @@ impl<const FUSED: bool> Compensated<FUSED> {
         self.err += c * (e + dlo.unwrap_or(0.0));
     }
 
+    /// [`Compensated::add_product`] by the fused multiply-add alone (`FUSED`), for a loop
+    /// without branches: `false` when the product left the range where that is exact (the
+    /// sum is then not to be kept). A zero factor stays in range while the other is below
+    /// `2^900`: both ways give `fl(a b)` and an error of `+0` then. Without `FUSED`, Dekker's splitting and always `true`.
+    #[inline(always)]
+    pub(super) fn add_product_in_range(&mut self, a: f64, b: f64) -> bool {
+        let (p, pe, in_range) = if FUSED {
+            let p = a * b;
+            let zero = (a == 0.0) | (b == 0.0);
+            let small = a.abs().max(b.abs()) <= FUSED_HIGHEST;
+            (p, a.mul_add(b, -p), fused_range(a, b, p) | (zero & small))
+        } else {
+            let (p, pe) = two_product::<false>(a, b);
+            (p, pe, true)
+        };
+        let (s, se) = two_sum(self.sum, p);
+        self.sum = s;
+        self.err += se + pe;
+        in_range
+    }
+
+    /// [`Compensated::add_face`] through [`Compensated::add_product_in_range`].
+    #[inline(always)]
+    pub(super) fn add_face_in_range(
+        &mut self,
+        c: f64,
+        hi_l: f64,
+        hi_k: f64,
+        dlo: Option<f64>,
+    ) -> bool {
+        let (s, e) = two_sum(hi_l, -hi_k);
+        let in_range = self.add_product_in_range(c, s);
+        self.err += c * (e + dlo.unwrap_or(0.0));
+        in_range
+    }
+
     #[inline(always)]
     pub(super) fn value(&self) -> f64 {
         self.sum + self.err
@@ -69,13 +106,16 @@ const FUSED_HIGHEST: f64 = f64::from_bits((1023 + 900) << 52);
 #[inline(always)]
 pub(super) fn two_product<const FUSED: bool>(a: f64, b: f64) -> (f64, f64) {
     let p = a * b;
-    if FUSED
-        && (FUSED_LOWEST..=f64::MAX).contains(&p.abs())
-        && a.abs().max(b.abs()) <= FUSED_HIGHEST
-    {
+    if FUSED && fused_range(a, b, p) {
         return (p, a.mul_add(b, -p));
     }
     dekker(a, b, p)
+}
+
+/// Whether `p = fl(a b)` lies where the fused multiply-add's error is Dekker's exactly.
+#[inline(always)]
+fn fused_range(a: f64, b: f64, p: f64) -> bool {
+    (FUSED_LOWEST..=f64::MAX).contains(&p.abs()) & (a.abs().max(b.abs()) <= FUSED_HIGHEST)
 }
 
 /// The error of `p = fl(a b)` by Dekker's splitting (no fused multiply-add needed).
@@ -142,5 +182,39 @@ mod tests {
         assert!(fused_taken > 100_000, "{fused_taken}");
         assert_eq!(FUSED_LOWEST, 2f64.powi(-900));
         assert_eq!(FUSED_HIGHEST, 2f64.powi(900));
+    }
+
+    /// A product with a zero factor (either sign) has the error `+0` both ways, the other
+    /// factor from subnormal to `2^900`: what lets the lanes of a residual row keep the fused
+    /// multiply-add for it. Beyond, Dekker's splitting overflows and the lanes hand over.
+    #[test]
+    fn a_zero_factor_has_the_error_plus_zero_both_ways() {
+        let others = [
+            0.0,
+            -0.0,
+            5e-324,
+            -1e-310,
+            1e-200,
+            0.3,
+            -7.0,
+            1e270,
+            -FUSED_HIGHEST,
+        ];
+        for z in [0.0f64, -0.0] {
+            for &v in &others {
+                for (a, b) in [(z, v), (v, z)] {
+                    let p = a * b;
+                    let fused = a.mul_add(b, -p);
+                    let (_, split) = dekker(a, b, p);
+                    assert_eq!(fused.to_bits(), 0f64.to_bits(), "{a} {b}");
+                    assert_eq!(split.to_bits(), 0f64.to_bits(), "{a} {b}");
+                    let mut acc = Compensated::<true>::new(1.0);
+                    assert!(acc.add_product_in_range(a, b), "{a} {b}");
+                }
+            }
+            for v in [1e300, -f64::MAX] {
+                assert!(!Compensated::<true>::new(1.0).add_product_in_range(z, v));
+            }
+        }
     }
 }
