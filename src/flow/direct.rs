@@ -106,28 +106,49 @@ impl Analysis {
     }
 }
 
-/// `x[cells[q]] = value(q)` (or `+=` with `add`) for every unknown `q` whose value is
-/// `Some`, in parallel over fixed chunks of unknowns: `cells` is increasing, so each chunk
-/// writes its own range of `x`.
-fn scatter(x: &mut [f64], cells: &[usize], value: impl Fn(usize) -> Option<f64> + Sync, add: bool) {
+/// `x_c[cells[q]] = value(q, c)` (or `+=` with `add`) for every column `x_c` of `xs` and
+/// every unknown `q` that is `live`, in parallel over fixed chunks of unknowns: `cells` is
+/// increasing, so each chunk writes its own range of each column. The columns in one pass:
+/// an unknown's values sit side by side in the factor's solve vectors, read once.
+fn scatter(
+    xs: &mut [&mut [f64]],
+    cells: &[usize],
+    live: impl Fn(usize) -> bool + Sync,
+    value: impl Fn(usize, usize) -> f64 + Sync,
+    add: bool,
+) {
     use rayon::prelude::*;
     const CHUNK: usize = 1 << 13;
-    let mut pieces = Vec::with_capacity(cells.len().div_ceil(CHUNK));
-    let (mut rest, mut offset) = (x, 0);
-    for q0 in (CHUNK..cells.len()).step_by(CHUNK) {
-        let (piece, tail) = rest.split_at_mut(cells[q0] - offset);
-        pieces.push((piece, offset));
-        (rest, offset) = (tail, cells[q0]);
+    let chunks = cells.len().div_ceil(CHUNK).max(1);
+    // pieces[t]: chunk `t`'s range of every column, from cell `offsets[t]` on.
+    let mut pieces: Vec<Vec<&mut [f64]>> =
+        (0..chunks).map(|_| Vec::with_capacity(xs.len())).collect();
+    let offsets: Vec<usize> = (0..chunks)
+        .map(|t| if t == 0 { 0 } else { cells[t * CHUNK] })
+        .collect();
+    for x in xs.iter_mut() {
+        let mut rest: &mut [f64] = x;
+        for t in 0..chunks {
+            let end = offsets.get(t + 1).map_or(rest.len(), |&e| e - offsets[t]);
+            let (piece, tail) = rest.split_at_mut(end);
+            pieces[t].push(piece);
+            rest = tail;
+        }
     }
-    pieces.push((rest, offset));
     pieces
         .into_par_iter()
         .enumerate()
-        .for_each(|(t, (piece, offset))| {
-            for q in t * CHUNK..cells.len().min((t + 1) * CHUNK) {
-                if let Some(v) = value(q) {
-                    let e = &mut piece[cells[q] - offset];
-                    *e = if add { *e + v } else { v };
+        .for_each(|(t, mut cols)| {
+            let offset = offsets[t];
+            let q0 = t * CHUNK;
+            let mine = &cells[q0..cells.len().min(q0 + CHUNK)];
+            for (q, &cell) in (q0..).zip(mine) {
+                if live(q) {
+                    let k = cell - offset;
+                    for (c, col) in cols.iter_mut().enumerate() {
+                        let v = value(q, c);
+                        col[k] = if add { col[k] + v } else { v };
+                    }
                 }
             }
         });
@@ -463,9 +484,8 @@ impl Factor {
                     Some(col) if live(q) => col.0[cells[q]],
                     _ => 0.0,
                 });
-                for (c, col) in cols.iter_mut().enumerate() {
-                    scatter(col.1, cells, |q| live(q).then(|| sol.value(q, c)), add);
-                }
+                let mut xs: Vec<&mut [f64]> = cols.iter_mut().map(|col| &mut *col.1).collect();
+                scatter(&mut xs, cells, live, |q, c| sol.value(q, c), add);
                 return;
             }
             (Structure::Whole(symbolic), _) => symbolic,
