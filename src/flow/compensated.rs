@@ -45,7 +45,8 @@ impl<const FUSED: bool> Compensated<FUSED> {
     /// [`Compensated::add_product`] by the fused multiply-add alone (`FUSED`), for a loop
     /// without branches: `false` when the product left the range where that is exact (the
     /// sum is then not to be kept). A zero factor stays in range while the other is below
-    /// `2^900`: both ways give `fl(a b)` and an error of `+0` then. Without `FUSED`, Dekker's splitting and always `true`.
+    /// `2^900`: both ways give `fl(a b)` and an error of `+0` then. Without `FUSED`, Dekker's
+    /// splitting and always `true`.
     #[inline(always)]
     pub(super) fn add_product_in_range(&mut self, a: f64, b: f64) -> bool {
         let (p, pe, in_range) = if FUSED {
