@@ -540,6 +540,38 @@ pub fn fine_stencil(c: &[f64], ny: usize, nx: usize, periodic: bool) -> (Stencil
 mod tests {
     use super::*;
 
+    /// Cell conductances from pairs of `u`: closed below `closed`, else over `decades`.
+    fn conductances(u: &[f64], closed: f64, decades: f64) -> Vec<f64> {
+        u.chunks_exact(2)
+            .map(|w| {
+                if w[0] < closed {
+                    0.0
+                } else {
+                    10f64.powf(-decades * w[1])
+                }
+            })
+            .collect()
+    }
+
+    /// A solution `hi` over `decades` from pairs of `u[..2n]` and its low part `lo` from
+    /// `u[2n..]`, some 1e-17 of it.
+    fn solution(u: &[f64], n: usize, decades: f64) -> (Vec<f64>, Vec<f64>) {
+        let hi: Vec<f64> = u[..2 * n]
+            .chunks_exact(2)
+            .map(|w| w[0] * 10f64.powf(-decades * w[1]))
+            .collect();
+        let lo = hi
+            .iter()
+            .zip(&u[2 * n..])
+            .map(|(v, w)| v * 1e-17 * w)
+            .collect();
+        (hi, lo)
+    }
+
+    fn bits(r: &[f64]) -> Vec<u64> {
+        r.iter().map(|v| v.to_bits()).collect()
+    }
+
     /// The residual rows with the fused multiply-add give the bits of those with Dekker's
     /// splitting, on conductances over 300 decades (products and their errors down to the
     /// subnormal range, where the fused path hands over to the splitting) and a solution
@@ -552,32 +584,14 @@ mod tests {
         let (ny, nx) = (23, 17);
         let n = ny * nx;
         let u = crate::test_support::lcg(0x2545_f491_4f6c_dd1d, 6 * n);
-        let c: Vec<f64> = u[..2 * n]
-            .chunks_exact(2)
-            .map(|w| {
-                if w[0] < 0.1 {
-                    0.0
-                } else {
-                    10f64.powf(-300.0 * w[1])
-                }
-            })
-            .collect();
+        let c = conductances(&u[..2 * n], 0.1, 300.0);
         for periodic in [false, true] {
             let (st, rhs) = fine_stencil(&c, ny, nx, periodic);
-            let hi: Vec<f64> = u[2 * n..4 * n]
-                .chunks_exact(2)
-                .map(|w| w[0] * 10f64.powf(-320.0 * w[1]))
-                .collect();
-            let lo: Vec<f64> = hi
-                .iter()
-                .zip(&u[4 * n..])
-                .map(|(v, w)| v * 1e-17 * w)
-                .collect();
+            let (hi, lo) = solution(&u[2 * n..], n, 320.0);
             for parts in [vec![&hi[..]], vec![&hi[..], &lo[..]]] {
                 let (mut r1, mut r2) = (vec![0.0; n], vec![0.0; n]);
                 st.residual_of_parts_with(true, &parts, &rhs, &mut r1);
                 st.residual_of_parts_with(false, &parts, &rhs, &mut r2);
-                let bits = |r: &[f64]| r.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
                 assert_eq!(bits(&r1), bits(&r2));
             }
         }
@@ -593,27 +607,10 @@ mod tests {
         let n = ny * nx;
         let u = crate::test_support::lcg(0x9e37_79b9_7f4a_7c15, 6 * n);
         for decades in [1.0, 300.0] {
-            let c: Vec<f64> = u[..2 * n]
-                .chunks_exact(2)
-                .map(|w| {
-                    if w[0] < 0.15 {
-                        0.0
-                    } else {
-                        10f64.powf(-decades * w[1])
-                    }
-                })
-                .collect();
+            let c = conductances(&u[..2 * n], 0.15, decades);
             for periodic in [false, true] {
                 let (st, rhs) = fine_stencil(&c, ny, nx, periodic);
-                let hi: Vec<f64> = u[2 * n..4 * n]
-                    .chunks_exact(2)
-                    .map(|w| w[0] * 10f64.powf(-decades * w[1]))
-                    .collect();
-                let lo: Vec<f64> = hi
-                    .iter()
-                    .zip(&u[4 * n..])
-                    .map(|(v, w)| v * 1e-17 * w)
-                    .collect();
+                let (hi, lo) = solution(&u[2 * n..], n, decades);
                 for fused in [false, true] {
                     if fused && !compensated::fused() {
                         continue;
@@ -627,7 +624,6 @@ mod tests {
                                 false => st.residual_cell::<false>(k / nx, k % nx, &parts, &rhs),
                             })
                             .collect();
-                        let bits = |r: &[f64]| r.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
                         assert_eq!(
                             bits(&lanes),
                             bits(&by_cells),
