@@ -73,6 +73,11 @@ pub(super) fn supernodal_forward<const K: usize>(
 }
 
 /// [`supernodal_forward`] in the instruction set of the function it is inlined into.
+///
+/// Per supernode: its diagonal block column by column, then the pattern's updates
+/// `t_r = Σ_c L_rc y_c` summed over the supernode's columns in a contiguous buffer (column
+/// by column, each a loop over contiguous rows that vectorises) and subtracted from `w` in
+/// one scattered pass, instead of one scattered read-modify-write of `w` per column.
 #[inline(always)]
 pub(super) fn supernodal_forward_plain<const K: usize>(
     sn: &SymbolicSupernodalCholesky<usize>,
@@ -80,35 +85,56 @@ pub(super) fn supernodal_forward_plain<const K: usize>(
     w: &mut [f64],
     stop: usize,
 ) {
+    let mut t = vec![0.0; K * widest_pattern(sn)];
     for s in 0..sn.n_supernodes() {
         let node = Supernode::of(sn, values, s);
         let (start, ncols, pattern) = (node.start, node.ncols, node.pattern);
-        for c in 0..ncols {
+        if start >= stop {
+            return;
+        }
+        let solved = ncols.min(stop - start);
+        for c in 0..solved {
             let i = start + c;
-            if i >= stop {
-                return;
-            }
             let col = node.column(c);
-            let mut y = [0.0; K];
-            for (k, yk) in y.iter_mut().enumerate() {
-                *yk = w[K * i + k] / col[c];
-                w[K * i + k] = *yk;
+            for k in 0..K {
+                w[K * i + k] /= col[c];
             }
-            for (wt, &l) in w[K * (i + 1)..K * (start + ncols)]
-                .chunks_exact_mut(K)
-                .zip(&col[c + 1..ncols])
-            {
+            let (head, tail) = w[K * i..K * (start + ncols)].split_at_mut(K);
+            for (wt, &l) in tail.chunks_exact_mut(K).zip(&col[c + 1..ncols]) {
                 for k in 0..K {
-                    wt[k] -= l * y[k];
-                }
-            }
-            for (&t, &l) in pattern.iter().zip(&col[ncols..]) {
-                for k in 0..K {
-                    w[K * t + k] -= l * y[k];
+                    wt[k] -= l * head[k];
                 }
             }
         }
+        let t = &mut t[..K * pattern.len()];
+        t.iter_mut().for_each(|v| *v = 0.0);
+        for c in 0..solved {
+            let mut y = [0.0; K];
+            y.copy_from_slice(&w[K * (start + c)..K * (start + c + 1)]);
+            for (tr, &l) in t.chunks_exact_mut(K).zip(&node.column(c)[ncols..]) {
+                for k in 0..K {
+                    tr[k] += l * y[k];
+                }
+            }
+        }
+        for (tr, &r) in t.chunks_exact(K).zip(pattern) {
+            for k in 0..K {
+                w[K * r + k] -= tr[k];
+            }
+        }
+        if solved < ncols {
+            return;
+        }
     }
+}
+
+/// The longest pattern of a supernode of `sn`: the rows a supernode's updates reach.
+fn widest_pattern(sn: &SymbolicSupernodalCholesky<usize>) -> usize {
+    let rptr = sn.col_ptr_for_row_idx();
+    (0..sn.n_supernodes())
+        .map(|s| rptr[s + 1] - rptr[s])
+        .max()
+        .unwrap_or(0)
 }
 
 /// The backward half of [`supernodal_solve`] for `K` interleaved columns, on the factor's
@@ -126,6 +152,11 @@ pub(super) fn supernodal_backward<const K: usize>(
 }
 
 /// [`supernodal_backward`] in the instruction set of the function it is inlined into.
+///
+/// Per supernode: `w` on its pattern gathered once into a contiguous buffer, then each
+/// column (last first) as its pattern's dot product with it (in four interleaved partial
+/// sums: one chain of dependent multiply-adds would wait on each before the next) and the
+/// diagonal block's rows below it.
 #[inline(always)]
 pub(super) fn supernodal_backward_plain<const K: usize>(
     sn: &SymbolicSupernodalCholesky<usize>,
@@ -133,46 +164,47 @@ pub(super) fn supernodal_backward_plain<const K: usize>(
     w: &mut [f64],
     stop: usize,
 ) {
+    let mut g = vec![0.0; K * widest_pattern(sn)];
     for s in (0..sn.n_supernodes()).rev() {
         let node = Supernode::of(sn, values, s);
         let (start, ncols, pattern) = (node.start, node.ncols, node.pattern);
         if start >= stop {
             continue;
         }
+        let g = &mut g[..K * pattern.len()];
+        for (gr, &r) in g.chunks_exact_mut(K).zip(pattern) {
+            gr.copy_from_slice(&w[K * r..K * (r + 1)]);
+        }
+        let (g4, g_rest) = g.split_at(K * (pattern.len() & !3));
         for c in (0..ncols.min(stop - start)).rev() {
             let col = node.column(c);
+            let below = &col[ncols..];
+            let mut part = [[0.0; K]; 4];
+            for (gs, ls) in g4.chunks_exact(4 * K).zip(below.chunks_exact(4)) {
+                for (q, p) in part.iter_mut().enumerate() {
+                    for k in 0..K {
+                        p[k] += ls[q] * gs[K * q + k];
+                    }
+                }
+            }
+            for (gr, &l) in g_rest.chunks_exact(K).zip(&below[g4.len() / K..]) {
+                for k in 0..K {
+                    part[0][k] += l * gr[k];
+                }
+            }
             let i = start + c;
+            let (head, tail) = w[K * i..K * (start + ncols)].split_at_mut(K);
             let mut a = [0.0; K];
-            a.copy_from_slice(&w[K * i..K * (i + 1)]);
-            for (wt, &l) in w[K * (i + 1)..K * (start + ncols)]
-                .chunks_exact(K)
-                .zip(&col[c + 1..ncols])
-            {
+            for k in 0..K {
+                a[k] = head[k] - ((part[0][k] + part[1][k]) + (part[2][k] + part[3][k]));
+            }
+            for (wt, &l) in tail.chunks_exact(K).zip(&col[c + 1..ncols]) {
                 for k in 0..K {
                     a[k] -= l * wt[k];
                 }
             }
-            // The pattern's sum in four interleaved partial sums: one chain of dependent
-            // multiply-adds would wait on each before the next (the forward half's updates
-            // are independent).
-            let below = &col[ncols..];
-            let mut part = [[0.0; K]; 4];
-            let (rows4, rows_rest) = pattern.split_at(pattern.len() & !3);
-            for (ts, ls) in rows4.chunks_exact(4).zip(below.chunks_exact(4)) {
-                for (q, p) in part.iter_mut().enumerate() {
-                    for k in 0..K {
-                        p[k] += ls[q] * w[K * ts[q] + k];
-                    }
-                }
-            }
-            for (&t, &l) in rows_rest.iter().zip(&below[rows4.len()..]) {
-                for k in 0..K {
-                    part[0][k] += l * w[K * t + k];
-                }
-            }
             for k in 0..K {
-                a[k] -= (part[0][k] + part[1][k]) + (part[2][k] + part[3][k]);
-                w[K * i + k] = a[k] / col[c];
+                head[k] = a[k] / col[c];
             }
         }
     }
