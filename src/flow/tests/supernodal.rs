@@ -4,6 +4,7 @@ use super::*;
 use crate::flow::llt::llt_values;
 use crate::flow::substitution::{supernodal_solve, Supernode};
 use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::sparse::linalg::cholesky::supernodal::SymbolicSupernodalCholesky;
 use faer::sparse::linalg::cholesky::{
     factorize_symbolic_cholesky, CholeskySymbolicParams, SymbolicCholesky, SymbolicCholeskyRaw,
     SymmetricOrdering,
@@ -64,6 +65,46 @@ fn analysis(a: &SparseColMat<usize, f64>, amd: bool) -> SymbolicCholesky<usize> 
         SymmetricOrdering::Custom(faer::perm::PermRef::new_checked(&id, &id, id.len()))
     };
     factorize_symbolic_cholesky(a.symbolic(), Side::Lower, order, params).unwrap()
+}
+
+/// The supernodal structure of a supernodal analysis.
+fn supernodes(symbolic: &SymbolicCholesky<usize>) -> &SymbolicSupernodalCholesky<usize> {
+    match symbolic.raw() {
+        SymbolicCholeskyRaw::Supernodal(sn) => sn,
+        SymbolicCholeskyRaw::Simplicial(_) => panic!("a supernodal analysis"),
+    }
+}
+
+/// `a`'s analysis ([`analysis`]) and the values of its factor ([`factor_values`]).
+fn factored(a: &SparseColMat<usize, f64>, amd: bool) -> (SymbolicCholesky<usize>, Vec<f64>) {
+    use crate::flow::llt::permuted_lower;
+    use crate::flow::supernodal::factor_values;
+    let symbolic = analysis(a, amd);
+    let lower = match symbolic.perm() {
+        Some(p) => permuted_lower(a, p.arrays().1),
+        None => a.clone(),
+    };
+    let sn = supernodes(&symbolic);
+    let mut values = vec![0.0; sn.len_val()];
+    factor_values(sn, lower.as_ref(), &mut values).unwrap();
+    (symbolic, values)
+}
+
+/// `‖b − A x‖₂ / ‖b‖₂` with `A` given by its lower triangle `a`.
+fn relative_residual(a: &SparseColMat<usize, f64>, x: &[f64], b: &[f64]) -> f64 {
+    let mut r = b.to_vec();
+    let (ptr, rows, vals) = (a.symbolic().col_ptr(), a.symbolic().row_idx(), a.val());
+    for j in 0..a.ncols() {
+        for p in ptr[j]..ptr[j + 1] {
+            let i = rows[p];
+            r[i] -= vals[p] * x[j];
+            if i != j {
+                r[j] -= vals[p] * x[i];
+            }
+        }
+    }
+    let norm = |v: &[f64]| v.iter().map(|t| t * t).sum::<f64>().sqrt();
+    norm(&r) / norm(b)
 }
 
 /// The factor's values match faer's numeric factor on the same analysis, with a fill-reducing
@@ -134,19 +175,7 @@ fn the_supernodal_factor_matches_faers_and_solves() {
         let mut w: Vec<f64> = fwd.iter().map(|&q| b[q]).collect();
         supernodal_solve(sn, &ours, &mut w);
         let x: Vec<f64> = (0..n).map(|q| w[inv[q]]).collect();
-        let mut r = b.clone();
-        let (ptr, rows, vals) = (a.symbolic().col_ptr(), a.symbolic().row_idx(), a.val());
-        for j in 0..n {
-            for p in ptr[j]..ptr[j + 1] {
-                let i = rows[p];
-                r[i] -= vals[p] * x[j];
-                if i != j {
-                    r[j] -= vals[p] * x[i];
-                }
-            }
-        }
-        let rel = r.iter().map(|v| v * v).sum::<f64>().sqrt()
-            / b.iter().map(|v| v * v).sum::<f64>().sqrt();
+        let rel = relative_residual(&a, &x, &b);
         assert!(rel < 1e-12, "{ny}×{nx}: relative residual {rel:e}");
     }
 }
@@ -210,21 +239,10 @@ fn the_wide_and_plain_builds_give_the_same_bits() {
 /// columns were solved together (a factor in halves) or apart (one factor, two threads).
 #[test]
 fn interleaved_columns_give_the_bits_of_each_alone() {
-    use crate::flow::llt::permuted_lower;
     use crate::flow::substitution::{supernodal_backward, supernodal_forward};
-    use crate::flow::supernodal::factor_values;
     for (ny, nx, amd) in [(24, 31, true), (40, 40, false), (64, 64, true)] {
-        let a = grid_operator(ny, nx, 5 + nx as u64, None);
-        let symbolic = analysis(&a, amd);
-        let SymbolicCholeskyRaw::Supernodal(sn) = symbolic.raw() else {
-            panic!("a supernodal analysis")
-        };
-        let a = match symbolic.perm() {
-            Some(p) => permuted_lower(&a, p.arrays().1),
-            None => a,
-        };
-        let mut values = vec![0.0; sn.len_val()];
-        factor_values(sn, a.as_ref(), &mut values).unwrap();
+        let (symbolic, values) = factored(&grid_operator(ny, nx, 5 + nx as u64, None), amd);
+        let sn = supernodes(&symbolic);
         let n = ny * nx;
         let b = lcg(17, 2 * n);
         let alone: Vec<Vec<u64>> = (0..2)
@@ -252,34 +270,23 @@ fn interleaved_columns_give_the_bits_of_each_alone() {
 /// same bits.
 #[test]
 fn a_right_hand_side_on_one_row_solves_against_the_operator() {
-    use crate::flow::llt::permuted_lower;
     use crate::flow::substitution::{supernodal_backward, supernodal_forward};
-    use crate::flow::supernodal::factor_values;
     for (ny, nx, amd) in [(40, 40, false), (64, 64, true), (33, 70, true)] {
         let a = grid_operator(ny, nx, 3 + ny as u64, None);
-        let symbolic = analysis(&a, amd);
-        let SymbolicCholeskyRaw::Supernodal(sn) = symbolic.raw() else {
-            panic!("a supernodal analysis")
-        };
+        let (symbolic, values) = factored(&a, amd);
+        let sn = supernodes(&symbolic);
+        let n = ny * nx;
         let (fwd, inv) = match symbolic.perm() {
             Some(p) => (p.arrays().0.to_vec(), p.arrays().1.to_vec()),
-            None => ((0..ny * nx).collect(), (0..ny * nx).collect()),
+            None => ((0..n).collect(), (0..n).collect()),
         };
-        let lower = match symbolic.perm() {
-            Some(p) => permuted_lower(&a, p.arrays().1),
-            None => a.clone(),
-        };
-        let mut values = vec![0.0; sn.len_val()];
-        factor_values(sn, lower.as_ref(), &mut values).unwrap();
-        let n = ny * nx;
         // Column 0: three cells of the first row; column 1: the whole last row.
         let mut b = vec![vec![0.0; n]; 2];
         for j in [1, nx / 2, nx - 2] {
             b[0][j] = 1.0 + j as f64;
         }
         b[1][(ny - 1) * nx..].fill(2.0);
-        let w2: Vec<f64> = (0..2 * n).map(|i| b[i % 2][fwd[i / 2]]).collect();
-        let mut both = w2.clone();
+        let mut both: Vec<f64> = (0..2 * n).map(|i| b[i % 2][fwd[i / 2]]).collect();
         supernodal_forward::<2>(sn, &values, &mut both, n);
         supernodal_backward::<2>(sn, &values, &mut both, n);
         for (c, b) in b.iter().enumerate() {
@@ -291,19 +298,7 @@ fn a_right_hand_side_on_one_row_solves_against_the_operator() {
                 x.iter().all(|&v| v > 0.0),
                 "{ny}×{nx}: a zero or negative entry"
             );
-            let mut r = b.clone();
-            let (ptr, rows, vals) = (a.symbolic().col_ptr(), a.symbolic().row_idx(), a.val());
-            for j in 0..n {
-                for p in ptr[j]..ptr[j + 1] {
-                    let i = rows[p];
-                    r[i] -= vals[p] * x[j];
-                    if i != j {
-                        r[j] -= vals[p] * x[i];
-                    }
-                }
-            }
-            let norm = |v: &[f64]| v.iter().map(|t| t * t).sum::<f64>().sqrt();
-            let rel = norm(&r) / norm(b);
+            let rel = relative_residual(&a, &x, b);
             assert!(
                 rel < 1e-12,
                 "{ny}×{nx}: column {c}: relative residual {rel:e}"
