@@ -21,34 +21,20 @@ use std::time::Instant;
 
 #[path = "bench_support.rs"]
 mod bench_support;
-use bench_support::Uniform;
+use bench_support::{grid_conductances, Uniform};
 
 use leakpath::flow::assemble::fine_stencil;
 use leakpath::flow::multigrid::Multigrid;
 
 fn main() {
-    let side: usize = std::env::var("SIDE")
-        .ok()
-        .and_then(|s| s.parse().ok())
-        .unwrap_or(2049);
-    let n = side * side;
     let mut seq = Uniform::new(0x2545_f491_4f6c_dd1d);
-    let mut uniform = || seq.next();
-    let c: Vec<f64> = match std::env::var("CONDUCTANCES") {
-        Ok(path) => std::fs::read(&path)
-            .unwrap_or_else(|e| panic!("CONDUCTANCES={path}: {e}"))
-            .chunks_exact(8)
-            .map(|b| f64::from_le_bytes(b.try_into().expect("8 bytes")))
-            .collect(),
-        Err(_) => (0..n).map(|_| 10f64.powf(-6.0 * uniform())).collect(),
-    };
-    assert_eq!(c.len(), n, "CONDUCTANCES must hold SIDE² = {n} values");
+    let (side, c) = grid_conductances(2049, &mut seq);
     let (st, _) = fine_stencil(&c, side, side, true);
     let t = Instant::now();
     let mg = Multigrid::new(st);
     let setup = t.elapsed().as_secs_f64();
     let m = mg.reduced_len().expect("a grid large enough to reduce");
-    let s: Vec<f64> = (0..m).map(|_| uniform() - 0.5).collect();
+    let s: Vec<f64> = (0..m).map(|_| seq.next() - 0.5).collect();
     let mut z = vec![0.0; m];
     let mut ms: Vec<f64> = (0..9)
         .map(|_| {
