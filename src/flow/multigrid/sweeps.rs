@@ -118,45 +118,52 @@ impl Graph {
         self.check_vectors(&[&*x, b, old]);
         x.par_chunks_mut(CHUNK).enumerate().for_each(|(blk, xc)| {
             let i0 = blk * CHUNK;
-            let i1 = i0 + xc.len();
-            let mut update = |t: usize| {
+            let len = xc.len();
+            let xp = xc.as_mut_ptr();
+            let zero = 0.0f64;
+            let update = |t: usize| {
                 let i = i0 + t;
                 // The row swept just before this one (none at the block's edge).
                 let prev = if reverse { i + 1 } else { i.wrapping_sub(1) };
-                // SAFETY: `i0 ≤ i < i1 ≤ n`; columns are below `n` and pointers within the
-                // entries (`check_rows`); a column in `[i0, i1)` indexes `xc` at `j − i0`.
+                // SAFETY: `i0 ≤ i < i0 + len ≤ n`; columns are below `n` and pointers within
+                // the entries (`check_rows`); a column in the block indexes `xc` at `j − i0`.
                 unsafe {
-                    let mut v = b.get_unchecked(i) - self.d.get_unchecked(i) * xc.get_unchecked(t);
-                    // `out_i` again, summed in the same order as the stored one (the same
-                    // bits): cheaper than reading it, the faces being read anyway.
-                    let mut out = 0.0;
+                    let mut v = b.get_unchecked(i) - self.d.get_unchecked(i) * *xp.add(t);
                     let mut w_prev = 0.0;
+                    // Each face's value chosen by selects, not branches: where a face lies
+                    // (this block, another, the row just swept) follows no pattern a branch
+                    // predictor learns on a contact gap. The row just swept reads a zero
+                    // here and is added last.
                     for p in *self.ptr.get_unchecked(i)..*self.ptr.get_unchecked(i + 1) {
                         let j = cols.at(p, i);
                         let w = f64::from(*self.w.get_unchecked(p));
-                        let inside = j >= i0 && j < i1;
-                        if inside && j == prev {
-                            w_prev = w;
+                        let rel = j.wrapping_sub(i0);
+                        let inside = rel < len;
+                        let is_prev = inside && j == prev;
+                        let src: *const f64 = if is_prev {
+                            &zero
                         } else if inside {
-                            v += w * xc.get_unchecked(j - i0);
+                            xp.add(rel)
                         } else {
-                            out += w.abs();
-                            v += w * old.get_unchecked(j);
-                        }
+                            old.as_ptr().add(j)
+                        };
+                        w_prev = if is_prev { w } else { w_prev };
+                        v += w * *src;
                     }
-                    let inv = 1.0 / (self.d.get_unchecked(i) + out);
-                    if prev >= i0 && prev < i1 {
-                        v += w_prev * xc.get_unchecked(prev - i0);
+                    let inv = 1.0 / (self.d.get_unchecked(i) + self.out.get_unchecked(i));
+                    let prel = prev.wrapping_sub(i0);
+                    if prel < len {
+                        v += w_prev * *xp.add(prel);
                     }
-                    *xc.get_unchecked_mut(t) += v * inv;
+                    *xp.add(t) += v * inv;
                 }
             };
             if reverse {
-                for t in (0..i1 - i0).rev() {
+                for t in (0..len).rev() {
                     update(t);
                 }
             } else {
-                for t in 0..i1 - i0 {
+                for t in 0..len {
                     update(t);
                 }
             }
@@ -222,12 +229,16 @@ impl Graph {
                 // SAFETY: as in `residual`.
                 unsafe {
                     let mut v = self.out.get_unchecked(i) * x.get_unchecked(i);
+                    // The faces the sweep read give a zero term by a select, not a branch
+                    // (as in `smooth_with`).
                     for p in *self.ptr.get_unchecked(i)..*self.ptr.get_unchecked(i + 1) {
                         let j = cols.at(p, i);
-                        if j >= i0 && j < i {
-                            continue;
-                        }
-                        v += f64::from(*self.w.get_unchecked(p)) * x.get_unchecked(j);
+                        let term = f64::from(*self.w.get_unchecked(p)) * x.get_unchecked(j);
+                        v += if j.wrapping_sub(i0) < i - i0 {
+                            0.0
+                        } else {
+                            term
+                        };
                     }
                     *rv = v;
                 }
