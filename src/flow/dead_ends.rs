@@ -39,21 +39,21 @@ pub fn anchors(spanning: &[bool], ny: usize, nx: usize, periodic: bool) -> Vec<(
         return Vec::new();
     }
     let edges = edge_masks(spanning, ny, nx, periodic);
-    let (disc, mut anchor, parent, preorder) = search(&edges, spanning, ny, nx);
+    let (mut visit, preorder) = search(&edges, spanning, ny, nx);
     // The backbone is the block of the tree edge `I–O` (the inlet's first child is the
     // outlet). A child `c` of `p` shares `p`'s block iff `low(c) < disc(p)`. Each cell's
     // anchor, [`NONE`] on the backbone, is written over its low point once that is read (in
     // preorder, a parent before its children).
     let (inlet, outlet) = (n, n + 1);
-    anchor[inlet] = NONE;
-    anchor[outlet] = NONE;
+    visit[inlet].low = NONE;
+    visit[outlet].low = NONE;
     let mut dead = Vec::new();
-    for &c in &preorder {
-        let (c, p) = (c as usize, parent[c as usize] as usize);
-        let a = if p < n && anchor[p] != NONE {
-            anchor[p]
-        } else if anchor[c] >= disc[p] {
-            // `anchor[c]` still holds `low(c)`: the edge `p–c` starts a block of its own.
+    for &(c, p) in &preorder {
+        let (c, p) = (c as usize, p as usize);
+        let a = if p < n && visit[p].low != NONE {
+            visit[p].low
+        } else if visit[c].low >= visit[p].disc {
+            // `visit[c].low` still holds `low(c)`: the edge `p–c` starts a block of its own.
             match p {
                 p if p == inlet => INLET,
                 p if p == outlet => OUTLET,
@@ -62,7 +62,7 @@ pub fn anchors(spanning: &[bool], ny: usize, nx: usize, periodic: bool) -> Vec<(
         } else {
             NONE
         };
-        anchor[c] = a;
+        visit[c].low = a;
         if a != NONE {
             dead.push((c as u32, a));
         }
@@ -115,23 +115,30 @@ fn edge_masks(spanning: &[bool], ny: usize, nx: usize, periodic: bool) -> Vec<u8
         .collect()
 }
 
+/// A vertex's discovery time and low point side by side: the search reads and writes both
+/// where it discovers a vertex, at scattered places (three separate arrays, parents
+/// included, took a cache miss for each).
+#[derive(Clone, Copy)]
+struct Visit {
+    disc: u32,
+    low: u32,
+}
+
 /// The depth-first search with low points from the inlet `I = n` (first to the outlet
-/// `O = n + 1` along the edge `I–O`): each vertex's discovery time, low point and parent, and
-/// the cells in preorder.
-#[allow(clippy::type_complexity)]
-fn search(
-    edges: &[u8],
-    spanning: &[bool],
-    ny: usize,
-    nx: usize,
-) -> (Vec<u32>, Vec<u32>, Vec<u32>, Vec<u32>) {
+/// `O = n + 1` along the edge `I–O`): each vertex's discovery time and low point, and the
+/// cells in preorder with their parents.
+fn search(edges: &[u8], spanning: &[bool], ny: usize, nx: usize) -> (Vec<Visit>, Vec<(u32, u32)>) {
     let n = ny * nx;
     let (inlet, outlet) = (n, n + 1);
     const UNSEEN: u32 = u32::MAX;
-    let mut disc = vec![UNSEEN; n + 2];
-    let mut low = vec![0u32; n + 2];
-    let mut parent = vec![NONE; n + 2];
-    let mut preorder: Vec<u32> = Vec::new();
+    let mut visit = vec![
+        Visit {
+            disc: UNSEEN,
+            low: 0
+        };
+        n + 2
+    ];
+    let mut preorder: Vec<(u32, u32)> = Vec::new();
     // Each reservoir's spanning cells, and how many of them it has tried.
     let rows: [Vec<u32>; 2] = [0, ny - 1].map(|i| {
         (i * nx..(i + 1) * nx)
@@ -142,15 +149,9 @@ fn search(
     let mut tried = [0usize; 2];
     // (vertex, its edges not yet tried, with the wrap bits): the path from the inlet.
     let mut stack: Vec<(u32, u8)> = Vec::new();
-    let mut time = 0u32;
-    let mut discover = |v: usize, p: usize, time: &mut u32, disc: &mut [u32], low: &mut [u32]| {
-        parent[v] = p as u32;
-        disc[v] = *time;
-        low[v] = *time;
-        *time += 1;
-    };
-    discover(inlet, NONE as usize, &mut time, &mut disc, &mut low);
-    discover(outlet, inlet, &mut time, &mut disc, &mut low);
+    visit[inlet] = Visit { disc: 0, low: 0 };
+    visit[outlet] = Visit { disc: 1, low: 1 };
+    let mut time = 2u32;
     stack.push((inlet as u32, 0));
     stack.push((outlet as u32, 0));
     while let Some(&mut (u, ref mut left)) = stack.last_mut() {
@@ -196,21 +197,25 @@ fn search(
                 stack.pop();
                 if let Some(&(p, _)) = stack.last() {
                     let p = p as usize;
-                    low[p] = low[p].min(low[u]);
+                    visit[p].low = visit[p].low.min(visit[u].low);
                 }
             }
             Some((v, back)) => {
-                if disc[v] == UNSEEN {
-                    discover(v, u, &mut time, &mut disc, &mut low);
-                    preorder.push(v as u32);
+                if visit[v].disc == UNSEEN {
+                    visit[v] = Visit {
+                        disc: time,
+                        low: time,
+                    };
+                    time += 1;
+                    preorder.push((v as u32, u as u32));
                     // The edge back to `u` is the tree edge, passed over once; a second edge
                     // between the same two cells (a wrapped grid of two columns) stays.
                     stack.push((v as u32, edges[v] & !back));
                 } else {
-                    low[u] = low[u].min(disc[v]);
+                    visit[u].low = visit[u].low.min(visit[v].disc);
                 }
             }
         }
     }
-    (disc, low, parent, preorder)
+    (visit, preorder)
 }
