@@ -33,7 +33,11 @@ cache; PETSc initialises), then the timed call: ``leakpath.flow(...)`` against
 ``solve_fluid_problem(...)`` + ``compute_total_flux(...)`` (assembly, connectivity,
 factor or preconditioner, solve and fluxes for both). The child reports the wall time of
 that call, ``Q``, the unknowns and its peak resident set (``VmHWM``, whole process); a
-child that only imports and loads the gap gives the baseline. Every native library runs on
+child that only imports and loads the gap gives the baseline. With ``--calls N`` the child
+then calls the same solve ``N − 1`` more times on the same gap and also reports the median
+of those (column ``repeat s``): the time of a sweep's later calls, once the process holds
+the memory a solve of that size uses (neither code keeps anything else from one call to
+the next). Every native library runs on
 ``--threads`` threads (``RAYON_NUM_THREADS``, ``OMP``/``MKL``/``OPENBLAS``/``NUMBA``).
 Times are medians of ``--repeats`` children, run round-robin (each method's k-th run
 before any method's next), so the medians of a ratio share the same stretch of a shared
@@ -64,7 +68,7 @@ PEER_MODULE = {"cholesky": "sksparse", "pardiso": "pypardiso"}
 CHILD = r"""
 import json, sys, time
 import numpy as np
-code, solver, path = sys.argv[1], sys.argv[2], sys.argv[3]
+code, solver, path, calls = sys.argv[1], sys.argv[2], sys.argv[3], int(sys.argv[4])
 def hwm():
     return [int(x.split()[1]) for x in open("/proc/self/status") if x.startswith("VmHWM")][0]
 if code == "leakpath":
@@ -112,6 +116,13 @@ if solver != "load":
         t = time.perf_counter()
         out.update(run(g, c))
         out["seconds"] = time.perf_counter() - t
+        again = []
+        for _ in range(calls - 1):  # the same gap again, as the calls of a sweep would be
+            t = time.perf_counter()
+            run(g, c)
+            again.append(time.perf_counter() - t)
+        if again:
+            out["repeat_seconds"] = sorted(again)[(len(again) - 1) // 2]
     except Exception as e:  # reported, not raised: the table says what failed
         out["error"] = f"{type(e).__name__}: {e}"[:300]
 out["vmhwm_kib"] = hwm()
@@ -176,10 +187,10 @@ def env(threads: int) -> dict[str, str]:
 
 
 def child(python: str, code: str, solver: str, path: Path, threads: int,
-          timeout: float) -> dict:
+          timeout: float, calls: int = 1) -> dict:
     t0 = time.perf_counter()
     try:
-        r = subprocess.run([python, "-c", CHILD, code, solver, str(path)],
+        r = subprocess.run([python, "-c", CHILD, code, solver, str(path), str(calls)],
                            capture_output=True, text=True, env=env(threads), timeout=timeout)
     except subprocess.TimeoutExpired:
         return {"error": f"timeout after {timeout:.0f} s"}
@@ -206,6 +217,10 @@ def main() -> None:
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--sizes", type=int, nargs="+", default=[257, 513, 1025, 2049])
     ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--calls", type=int, default=1,
+                    help="timed calls per child on the same gap: the first is the table's "
+                    "'median s', the median of the others its 'repeat call s' (a sweep's "
+                    "later calls, the process's memory already in use)")
     ap.add_argument("--only", nargs="+", default=None,
                     help="run only these methods, e.g. leakpath:auto reynoldsflow:pardiso")
     ap.add_argument("--skip", nargs="+", default=[],
@@ -279,7 +294,7 @@ def measure_all(a, methods, rows) -> None:
                     if m in done:
                         continue
                     code, solver, py = m
-                    r = child(py, code, solver, path, a.threads, a.timeout)
+                    r = child(py, code, solver, path, a.threads, a.timeout, a.calls)
                     runs[m].append(r)
                     print(n, code, solver, json.dumps(r), flush=True)
                     if "error" in r or (k == 0 and r["seconds"] > a.single_above):
@@ -308,6 +323,9 @@ def add_rows(n: int, base_mib: float, runs: dict, last: dict, rows: list) -> Non
                        else ok[0].get("conservation")),
                 iterations=ok[0].get("iterations"), ok=len(ok),
             )
+            again = [r["repeat_seconds"] for r in ok if "repeat_seconds" in r]
+            if again:
+                row["repeat_seconds"] = statistics.median(again)
             last[key] = row["seconds"]
         if len(ok) < len(mruns):
             row["error"] = [r for r in mruns if "error" in r][0]["error"]
@@ -333,15 +351,19 @@ def write(a, rows, started, load_before, load_after, petsc_py, note="") -> None:
         f"- threads per solve: {a.threads}; medians of {a.repeats} child processes, run "
         f"round-robin across the methods (one child when the first took over "
         f"{a.single_above:g} s: column 'runs')",
-    ] + ([f"- **{note}**"] if note else [])
+    ] + ([f"- timed calls per child: {a.calls}, on the same gap: 'median s' is each child's "
+          f"first call, 'repeat s' the median over children of the median of its later "
+          f"calls (a sweep's calls after the first, the process's memory already in use)"]
+         if a.calls > 1 else []) + ([f"- **{note}**"] if note else [])
     for k, v in versions(a.python, petsc_py).items():
         lines.append(f"- {k}: {v}")
+    repeat = a.calls > 1
     lines += [
         "- gaps: `" + f"{a.cache}/spectral_N_{a.separation}.npz" + "` (benchmarks/flow_gaps.py)",
         "",
-        "| size | unknowns | code | solver | runs | median s | peak MiB | Q | Q rel. diff "
-        "vs leakpath auto | inlet/outlet rel. diff |",
-        "|---|---|---|---|---|---|---|---|---|---|",
+        "| size | unknowns | code | solver | runs | median s | " + ("repeat s | " if repeat else "")
+        + "peak MiB | Q | Q rel. diff vs leakpath auto | inlet/outlet rel. diff |",
+        "|---|---|---|---|---|---|" + ("---|" if repeat else "") + "---|---|---|---|",
     ]
     by_n: dict[int, list[dict]] = {}
     for r in rows:
@@ -356,24 +378,40 @@ def write(a, rows, started, load_before, load_after, petsc_py, note="") -> None:
                 lines.append(
                     f"| {n}² | {r['unknowns']} | {r['code']} | {name} | {r['ok']} "
                     f"| {r['seconds']:.3f} "
-                    f"| {r['peak_mib']:.0f} | {r['Q']:.10e} | {fmt_q(r['Q'], ref)} "
+                    + (f"| {r['repeat_seconds']:.3f} " if repeat and "repeat_seconds" in r
+                       else "| — " if repeat else "")
+                    + f"| {r['peak_mib']:.0f} | {r['Q']:.10e} | {fmt_q(r['Q'], ref)} "
                     f"| {fmt_e(r.get('inout'))} |"
                 )
             else:
                 lines.append(f"| {n}² | — | {r['code']} | {name} | {r['runs']} | "
-                             f"{r.get('error', '?')[:120]} | — | — | — | — |")
+                             f"{r.get('error', '?')[:120]} | " + ("— | " if repeat else "")
+                             + "— | — | — | — |")
     lines += ["", "Best of each code per size (median s; ratio = peer best / leakpath best, "
               "> 1: leakpath faster):", "",
-              "| size | leakpath best | s | ReynoldsFlow best | s | ratio |",
-              "|---|---|---|---|---|---|"]
+              "| size | leakpath best | s | ReynoldsFlow best | s | ratio |"
+              + (" leakpath best, repeat s | ReynoldsFlow best, repeat s | repeat ratio |"
+                 if repeat else ""),
+              "|---|---|---|---|---|---|" + ("---|---|---|" if repeat else "")]
     for n, rs in by_n.items():
         lp = [r for r in rs if r["code"] == "leakpath" and "seconds" in r]
         pe = [r for r in rs if r["code"] == "reynoldsflow" and "seconds" in r]
         if lp and pe:
             b1 = min(lp, key=lambda r: r["seconds"])
             b2 = min(pe, key=lambda r: r["seconds"])
-            lines.append(f"| {n}² | {b1['solver']} | {b1['seconds']:.3f} | {b2['solver']} | "
-                         f"{b2['seconds']:.3f} | {b2['seconds'] / b1['seconds']:.2f} |")
+            line = (f"| {n}² | {b1['solver']} | {b1['seconds']:.3f} | {b2['solver']} | "
+                    f"{b2['seconds']:.3f} | {b2['seconds'] / b1['seconds']:.2f} |")
+            lr = [r for r in lp if "repeat_seconds" in r]
+            pr = [r for r in pe if "repeat_seconds" in r]
+            if repeat and lr and pr:
+                c1 = min(lr, key=lambda r: r["repeat_seconds"])
+                c2 = min(pr, key=lambda r: r["repeat_seconds"])
+                line += (f" {c1['solver']} {c1['repeat_seconds']:.3f} | {c2['solver']} "
+                         f"{c2['repeat_seconds']:.3f} | "
+                         f"{c2['repeat_seconds'] / c1['repeat_seconds']:.2f} |")
+            elif repeat:
+                line += " — | — | — |"
+            lines.append(line)
     lines += ["", "Memory (MiB, median peak resident set of the child; baseline = a child "
               "that imports leakpath and numpy and loads the gap; 'after warm-up' = the "
               "peak before the timed call, imports and library state included):", "",
