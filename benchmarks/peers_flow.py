@@ -240,6 +240,8 @@ def main() -> None:
                          "this factor exceeds --timeout")
     ap.add_argument("--out", type=Path, default=ROOT / "benchmarks/results/peers_flow.md")
     a = ap.parse_args()
+    if a.calls < 1:
+        ap.error("--calls must be at least 1")
 
     petsc_py = a.petsc_python if a.petsc_python and Path(a.petsc_python).exists() else None
     methods: list[tuple[str, str, str]] = [("leakpath", s, a.python) for s in LEAKPATH]
