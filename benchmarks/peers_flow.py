@@ -345,6 +345,7 @@ def fmt_q(q: float | None, ref: float | None) -> str:
 
 
 def write(a, rows, started, load_before, load_after, petsc_py, note="") -> None:
+    repeat = a.calls > 1
     lines = [
         f"\n## Run of {started}\n",
         f"- command: `{' '.join([Path(sys.executable).name] + sys.argv)}`",
@@ -356,10 +357,9 @@ def write(a, rows, started, load_before, load_after, petsc_py, note="") -> None:
     ] + ([f"- timed calls per child: {a.calls}, on the same gap: 'median s' is each child's "
           f"first call, 'repeat s' the median over children of the median of its later "
           f"calls (a sweep's calls after the first, the process's memory already in use)"]
-         if a.calls > 1 else []) + ([f"- **{note}**"] if note else [])
+         if repeat else []) + ([f"- **{note}**"] if note else [])
     for k, v in versions(a.python, petsc_py).items():
         lines.append(f"- {k}: {v}")
-    repeat = a.calls > 1
     lines += [
         "- gaps: `" + f"{a.cache}/spectral_N_{a.separation}.npz" + "` (benchmarks/flow_gaps.py)",
         "",
@@ -377,11 +377,10 @@ def write(a, rows, started, load_before, load_after, petsc_py, note="") -> None:
             name = r["solver"] + (f" ({r['ran']})" if r["code"] == "leakpath"
                                   and r["solver"] == "auto" and r.get("ran") else "")
             if "seconds" in r:
+                again = f"| {r['repeat_seconds']:.3f} " if "repeat_seconds" in r else "| — "
                 lines.append(
                     f"| {n}² | {r['unknowns']} | {r['code']} | {name} | {r['ok']} "
-                    f"| {r['seconds']:.3f} "
-                    + (f"| {r['repeat_seconds']:.3f} " if repeat and "repeat_seconds" in r
-                       else "| — " if repeat else "")
+                    f"| {r['seconds']:.3f} " + (again if repeat else "")
                     + f"| {r['peak_mib']:.0f} | {r['Q']:.10e} | {fmt_q(r['Q'], ref)} "
                     f"| {fmt_e(r.get('inout'))} |"
                 )
