@@ -26,12 +26,20 @@ EXIT_SLACK = 5.0
 #: When to interrupt, after the child says the solve starts.
 DELAY = 1.0
 
-#: Python's own Ctrl-C handler, installed first by every child: a process started with SIGINT
-#: ignored (a background job of a non-interactive shell, and the children of such a pytest)
-#: would otherwise keep ignoring it, and these tests would measure nothing.
-DEFAULT_SIGINT = "import signal; signal.signal(signal.SIGINT, signal.default_int_handler)"
 
-CHILD = DEFAULT_SIGINT + """
+@pytest.fixture(autouse=True)
+def _python_sigint_handler():
+    """Python's own Ctrl-C handler in this process while each test runs. A suite started with
+    SIGINT ignored (a background job of a non-interactive shell) would otherwise pass the
+    ignored disposition to its children and keep it itself, and these tests would measure
+    nothing; a handler, unlike an ignored signal, is reset to the default at `exec`, so the
+    children start as from a terminal."""
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, previous)
+
+
+CHILD = """
 import sys, time
 import numpy as np
 import leakpath
@@ -117,13 +125,9 @@ def test_sigint_stops_the_cli(tmp_path) -> None:
         check=True,
         capture_output=True,
     )
-    args = ["sweep", str(surface), "--out", str(tmp_path / "run"), "--solver", "lawson-hanson",
-            "--no-warm-start", "--levels", "2"]
-    # `python -m leakpath …`, with Python's Ctrl-C handler installed first.
-    main = (f"{DEFAULT_SIGINT}; import runpy, sys; sys.argv = ['leakpath', *{args!r}]; "
-            "runpy.run_module('leakpath', run_name='__main__', alter_sys=True)")
     proc = subprocess.Popen(
-        [sys.executable, "-c", main],
+        [sys.executable, "-m", "leakpath", "sweep", str(surface), "--out",
+         str(tmp_path / "run"), "--solver", "lawson-hanson", "--no-warm-start", "--levels", "2"],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
@@ -155,8 +159,6 @@ def test_interrupted_problem_can_be_solved_again() -> None:
 
     s = leakpath.rmd(9, 2.2, seed=1)
     prob = leakpath.ContactProblem(s)
-    # Python's Ctrl-C handler, whatever this process was started with (see DEFAULT_SIGINT).
-    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
     timer = threading.Timer(0.5, os.kill, args=(os.getpid(), signal.SIGINT))
     timer.start()
     try:
@@ -164,7 +166,6 @@ def test_interrupted_problem_can_be_solved_again() -> None:
             prob.solve(0.5 * s.height_range, solver="active-set")
     finally:
         timer.cancel()
-        signal.signal(signal.SIGINT, previous)
     a = 0.02 * s.height_range
     again = prob.solve(a, solver="active-set", warm_start=True)
     fresh = leakpath.ContactProblem(s).solve(a, solver="active-set")
