@@ -49,6 +49,7 @@ use super::halves;
 use super::llt::{failed, llt_values};
 use super::lower::lower_csc;
 use super::substitution::supernodal_solve;
+use super::symbolic::Layout;
 use crate::error::{Error, Result};
 
 /// Iterative-refinement steps at most per right-hand side.
@@ -510,8 +511,8 @@ impl Factor {
             }
             let values = &*values;
             rayon::join(
-                || supernodal_solve(sn, values, w0),
-                || supernodal_solve(sn, values, w1),
+                || supernodal_solve(Layout::of_faer(sn), values, w0),
+                || supernodal_solve(Layout::of_faer(sn), values, w1),
             );
             for (p, &q) in fwd.iter().enumerate() {
                 if live(q) {

@@ -32,18 +32,14 @@ use faer::linalg::matmul::triangular::{matmul, BlockStructure};
 use faer::linalg::triangular_solve::{
     solve_lower_triangular_in_place, solve_upper_triangular_in_place,
 };
-use faer::sparse::linalg::cholesky::{
-    factorize_symbolic_cholesky, supernodal::SymbolicSupernodalCholesky, CholeskySymbolicParams,
-    SymbolicCholesky, SymbolicCholeskyRaw, SymmetricOrdering,
-};
-use faer::sparse::linalg::SupernodalThreshold;
 use faer::sparse::{SparseColMat, SymbolicSparseColMat};
-use faer::{Accum, Mat, Par, Side};
+use faer::{Accum, Mat, Par};
 
 use super::assemble::Stencil;
-use super::llt::{failed, llt_values};
+use super::llt::{failed, supernodal_values};
 use super::lower::lower_csc;
 use super::substitution::{supernodal_backward, supernodal_forward, Supernode};
+use super::symbolic::Supernodes;
 use crate::error::Result;
 
 /// Grids with at least this many unknowns are factored in halves when their order has a
@@ -62,7 +58,7 @@ struct SideAnalysis {
     unknowns: Vec<usize>,
     /// Unknowns of the side itself (the separator's are the last `k`).
     own: usize,
-    symbolic: SymbolicCholesky<usize>,
+    symbolic: Supernodes,
 }
 
 /// The symbolic analysis of a factor in halves.
@@ -126,22 +122,20 @@ impl Analysis {
     ) -> Result<(Self, [Lower; 2])> {
         let (na, nb) = cut;
         let sep = &order[na + nb..];
-        let side = |own: &[usize]| -> Result<(SideAnalysis, Lower)> {
+        let mut place = vec![0u32; order.len()];
+        for (p, &q) in order.iter().enumerate() {
+            place[q] = p as u32;
+        }
+        let side = |own: &[usize], first: usize| -> Result<(SideAnalysis, Lower)> {
             let unknowns: Vec<usize> = own.iter().chain(sep).copied().collect();
-            let a = side_matrix(st, index, cells, &unknowns);
-            let params = CholeskySymbolicParams {
-                supernodal_flop_ratio_threshold: SupernodalThreshold::FORCE_SUPERNODAL,
-                ..Default::default()
-            };
-            // The identity as a custom order: faer's `Identity` takes the pattern as an upper
-            // triangle whatever the side given, a custom order converts it.
-            let id: Vec<usize> = (0..unknowns.len()).collect();
-            let perm = faer::perm::PermRef::new_checked(&id, &id, id.len());
-            let symbolic = factorize_symbolic_cholesky(
-                a.symbolic(),
-                Side::Lower,
-                SymmetricOrdering::Custom(perm),
-                params,
+            let a = side_matrix(st, index, cells, &unknowns, |q| {
+                local(place[q] as usize, first, own.len(), na + nb)
+            });
+            // The side's own order: its matrix is built in elimination order.
+            let symbolic = Supernodes::analyse(
+                unknowns.len(),
+                a.symbolic().col_ptr(),
+                a.symbolic().row_idx(),
             )
             .map_err(failed)?;
             Ok((
@@ -153,16 +147,7 @@ impl Analysis {
                 a,
             ))
         };
-        let ((a, b), place) = rayon::join(
-            || rayon::join(|| side(&order[..na]), || side(&order[na..na + nb])),
-            || {
-                let mut place = vec![0u32; order.len()];
-                for (p, &q) in order.iter().enumerate() {
-                    place[q] = p as u32;
-                }
-                place
-            },
-        );
+        let (a, b) = rayon::join(|| side(&order[..na], 0), || side(&order[na..na + nb], na));
         let ((sa, ma), (sb, mb)) = (a?, b?);
         Ok((
             Analysis {
@@ -176,10 +161,14 @@ impl Analysis {
 
     /// The two sides' matrices of the operator `st` on this analysis's unknowns.
     pub fn matrices(&self, st: &Stencil, index: &[usize], cells: &[usize]) -> [Lower; 2] {
-        let (a, b) = rayon::join(
-            || side_matrix(st, index, cells, &self.sides[0].unknowns),
-            || side_matrix(st, index, cells, &self.sides[1].unknowns),
-        );
+        let [sa, sb] = &self.sides;
+        let sep0 = sa.own + sb.own;
+        let at = |sd: &SideAnalysis, first: usize| {
+            side_matrix(st, index, cells, &sd.unknowns, |q| {
+                local(self.place[q] as usize, first, sd.own, sep0)
+            })
+        };
+        let (a, b) = rayon::join(|| at(sa, 0), || at(sb, sa.own));
         [a, b]
     }
 
@@ -187,7 +176,7 @@ impl Analysis {
     pub fn entries(&self) -> usize {
         self.sides
             .iter()
-            .map(|s| s.symbolic.len_val())
+            .map(|s| s.symbolic.layout().len_val())
             .sum::<usize>()
             + self.k * self.k
     }
@@ -198,7 +187,7 @@ impl Analysis {
         let sides: u64 = self
             .sides
             .iter()
-            .map(|s| super::llt::scratch_bytes(&s.symbolic, Par::Seq))
+            .map(|s| super::supernodal::scratch_bytes(s.symbolic.layout()))
             .sum();
         sides + 3 * 8 * (self.k * self.k) as u64
     }
@@ -210,25 +199,42 @@ impl Analysis {
 }
 
 /// The lower triangle of `A[unknowns, unknowns]` in the order of `unknowns`.
-fn side_matrix(st: &Stencil, index: &[usize], cells: &[usize], unknowns: &[usize]) -> Lower {
-    let mut local = vec![usize::MAX; cells.len()];
-    for (p, &q) in unknowns.iter().enumerate() {
-        local[q] = p;
-    }
+/// `local(q)`: the unknown's position in the side's matrix, `usize::MAX` off the side.
+fn side_matrix(
+    st: &Stencil,
+    index: &[usize],
+    cells: &[usize],
+    unknowns: &[usize],
+    local: impl Fn(usize) -> usize,
+) -> Lower {
     let side_cells: Vec<usize> = unknowns.iter().map(|&q| cells[q]).collect();
     let (col_ptr, row_idx, vals) = lower_csc(st, &side_cells, |l| match index[l] {
         usize::MAX => usize::MAX,
-        q => local[q],
+        q => local(q),
     });
     let m = unknowns.len();
     let pattern = SymbolicSparseColMat::new_checked(m, m, col_ptr, None, row_idx);
     SparseColMat::new(pattern, vals)
 }
 
+/// The position in a side's matrix of the unknown at position `p` of the elimination order
+/// `[A, B, S]`: the side's own unknowns are at `first..first + own`, the separator's from
+/// `sep0`, after them in the side's matrix; `usize::MAX` for the other side's.
+#[inline]
+fn local(p: usize, first: usize, own: usize, sep0: usize) -> usize {
+    if p >= sep0 {
+        own + (p - sep0)
+    } else if p >= first && p < first + own {
+        p - first
+    } else {
+        usize::MAX
+    }
+}
+
 /// `LEAKPATH_FLOW_PROFILE`'s lines for a side: its supernodes by width (powers of two), the
 /// factor's flops, and the times of its numeric factor and of its separator's product.
 fn profile_side(sa: &SideAnalysis, t_factor: f64, t_separator: f64) {
-    let sn = supernodal(&sa.symbolic);
+    let sn = sa.symbolic.layout();
     let (b, e, rp) = (
         sn.supernode_begin(),
         sn.supernode_end(),
@@ -247,18 +253,10 @@ fn profile_side(sa: &SideAnalysis, t_factor: f64, t_separator: f64) {
          16+: {:?}), {flops:.3e} flops; numeric {t_factor:.4} s, separator's product \
          {t_separator:.4} s",
         sa.unknowns.len(),
-        sa.symbolic.len_val(),
+        sn.len_val(),
         sn.n_supernodes(),
         &widths[1..],
     );
-}
-
-fn supernodal(s: &SymbolicCholesky<usize>) -> &SymbolicSupernodalCholesky<usize> {
-    match s.raw() {
-        SymbolicCholeskyRaw::Supernodal(sn) => sn,
-        // `Analysis::new` asks faer for the supernodal structure.
-        SymbolicCholeskyRaw::Simplicial(_) => unreachable!("a supernodal analysis"),
-    }
 }
 
 impl Factor {
@@ -279,15 +277,14 @@ impl Factor {
             }
         }
         let side = |sa: &SideAnalysis, a: Lower| -> Result<(Vec<f64>, Mat<f64>)> {
-            let symbolic = &sa.symbolic;
+            let sn = sa.symbolic.layout();
             let t0 = std::time::Instant::now();
-            let values = llt_values(symbolic, &a, Par::Seq)?;
+            let values = supernodal_values(sn, &a)?;
             let t1 = t0.elapsed().as_secs_f64();
             drop(a);
             // The separator block `L_X` (rows and columns `own..`), then `L_X L_Xᵀ`.
             let (own, k) = (sa.own, sa.unknowns.len() - sa.own);
             let mut lx = Mat::<f64>::zeros(k, k);
-            let sn = supernodal(symbolic);
             for t in 0..sn.n_supernodes() {
                 let node = Supernode::of(sn, &values, t);
                 let (start, ncols, pattern) = (node.start, node.ncols, node.pattern);
@@ -376,7 +373,7 @@ impl Factor {
             }
             // The separator's rows gather the sides' updates.
             w[2 * sa.own..].iter_mut().for_each(|v| *v = 0.0);
-            supernodal_forward::<2>(supernodal(&sa.symbolic), values, w, sa.own);
+            supernodal_forward::<2>(sa.symbolic.layout(), values, w, sa.own);
         };
         let [wa, wb] = &mut self.work;
         rayon::join(
@@ -401,7 +398,7 @@ impl Factor {
             }
         }
         let backward = |sa: &SideAnalysis, values: &[f64], w: &mut [f64]| {
-            supernodal_backward::<2>(supernodal(&sa.symbolic), values, w, sa.own);
+            supernodal_backward::<2>(sa.symbolic.layout(), values, w, sa.own);
         };
         rayon::join(
             || backward(&an.sides[0], &self.values[0], wa),

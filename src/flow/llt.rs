@@ -7,6 +7,7 @@ use faer::sparse::{SparseColMat, SymbolicSparseColMat};
 use faer::{Par, Side};
 
 use super::supernodal::{self, factor_values};
+use super::symbolic::Layout;
 use crate::error::{Error, Result};
 
 /// The sparse Cholesky factor's failure: `what` went wrong.
@@ -28,15 +29,8 @@ pub(super) fn llt_values(
 ) -> Result<Vec<f64>> {
     let len = symbolic.len_val();
     if let SymbolicCholeskyRaw::Supernodal(sn) = symbolic.raw() {
-        // Zeros written here, not the kernel's zero pages: the factor adds into its values,
-        // and a zero page first read there is faulted again where it is written.
-        let mut values = crate::alloc::try_filled(len, 0.0, "the factor")
-            .map_err(|_| failed("out of memory"))?;
         let permuted = permutation(symbolic).map(|inv| permuted_lower(a, inv));
-        let a = permuted.as_ref().unwrap_or(a);
-        factor_values(sn, a.as_ref(), &mut values)
-            .map_err(|j| failed(format!("the pivot of column {j} is not positive")))?;
-        return Ok(values);
+        return supernodal_values(Layout::of_faer(sn), permuted.as_ref().unwrap_or(a));
     }
     // Zeroed pages from the kernel: faer writes every value before it reads one.
     let mut values: Vec<f64> =
@@ -57,6 +51,18 @@ pub(super) fn llt_values(
     Ok(values)
 }
 
+/// The values of the factor of `a` (lower triangle, in the factor's order) on the
+/// supernodal structure `sn` ([`super::supernodal`]).
+pub(super) fn supernodal_values(sn: Layout<'_>, a: &SparseColMat<usize, f64>) -> Result<Vec<f64>> {
+    // Zeros written here, not the kernel's zero pages: the factor adds into its values,
+    // and a zero page first read there is faulted again where it is written.
+    let mut values = crate::alloc::try_filled(sn.len_val(), 0.0, "the factor")
+        .map_err(|_| failed("out of memory"))?;
+    factor_values(sn, a.as_ref(), &mut values)
+        .map_err(|j| failed(format!("the pivot of column {j} is not positive")))?;
+    Ok(values)
+}
+
 /// Bytes of [`llt_values`]'s scratch beside the values: the supernodal factor's (with the
 /// permuted operator: at most three entries per column of the five-point stencil's lower
 /// triangle, row and value each, the column pointers and their fill counters), or faer's
@@ -69,7 +75,7 @@ pub(super) fn scratch_bytes(symbolic: &SymbolicCholesky<usize>, par: Par) -> u64
             } else {
                 0
             };
-            supernodal::scratch_bytes(sn) + permuted
+            supernodal::scratch_bytes(Layout::of_faer(sn)) + permuted
         }
         SymbolicCholeskyRaw::Simplicial(_) => symbolic
             .factorize_numeric_llt_scratch::<f64>(par, Default::default())

@@ -55,6 +55,7 @@ pub mod order;
 mod paths;
 mod substitution;
 mod supernodal;
+mod symbolic;
 mod wide;
 
 use rayon::prelude::*;

@@ -3,7 +3,7 @@
 //! faer's general solve dispatches dense kernels and a temporary per supernode, and the
 //! supernodes of the flow's factors have about five columns (docs/flow.md).
 
-use faer::sparse::linalg::cholesky::supernodal::SymbolicSupernodalCholesky;
+use super::symbolic::Layout;
 
 /// Supernode `s` of a supernodal factor with values `values`: its first column `start`, its
 /// `ncols` columns, the rows of its pattern below them, and its dense column-major block
@@ -17,11 +17,7 @@ pub(super) struct Supernode<'a> {
 
 impl<'a> Supernode<'a> {
     #[inline(always)]
-    pub(super) fn of(
-        sn: &'a SymbolicSupernodalCholesky<usize>,
-        values: &'a [f64],
-        s: usize,
-    ) -> Self {
+    pub(super) fn of(sn: Layout<'a>, values: &'a [f64], s: usize) -> Self {
         let (start, end) = (sn.supernode_begin()[s], sn.supernode_end()[s]);
         let (rptr, vptr) = (sn.col_ptr_for_row_idx(), sn.col_ptr_for_val());
         Supernode {
@@ -45,11 +41,7 @@ impl<'a> Supernode<'a> {
 /// triangle) on top of the rows of its pattern. Forward by columns (`y_c = w_c / L_cc`,
 /// then `w_r −= L_rc y_c` below), backward by rows of `Lᵀ`
 /// (`y_c = (w_c − Σ_r L_rc y_r) / L_cc`).
-pub(super) fn supernodal_solve(
-    sn: &SymbolicSupernodalCholesky<usize>,
-    values: &[f64],
-    w: &mut [f64],
-) {
+pub(super) fn supernodal_solve(sn: Layout<'_>, values: &[f64], w: &mut [f64]) {
     let n = w.len();
     supernodal_forward::<1>(sn, values, w, n);
     supernodal_backward::<1>(sn, values, w, n);
@@ -61,7 +53,7 @@ pub(super) fn supernodal_solve(
 /// every row below, the separator's included. Each column's arithmetic is that of
 /// `K = 1`.
 pub(super) fn supernodal_forward<const K: usize>(
-    sn: &SymbolicSupernodalCholesky<usize>,
+    sn: Layout<'_>,
     values: &[f64],
     w: &mut [f64],
     stop: usize,
@@ -81,7 +73,7 @@ pub(super) fn supernodal_forward<const K: usize>(
 /// read-modify-write of `w` per column.
 #[inline(always)]
 pub(super) fn supernodal_forward_plain<const K: usize>(
-    sn: &SymbolicSupernodalCholesky<usize>,
+    sn: Layout<'_>,
     values: &[f64],
     w: &mut [f64],
     stop: usize,
@@ -140,7 +132,7 @@ pub(super) fn supernodal_forward_plain<const K: usize>(
 }
 
 /// The longest pattern of a supernode of `sn`: the rows a supernode's updates reach.
-fn widest_pattern(sn: &SymbolicSupernodalCholesky<usize>) -> usize {
+fn widest_pattern(sn: Layout<'_>) -> usize {
     let rptr = sn.col_ptr_for_row_idx();
     (0..sn.n_supernodes())
         .map(|s| rptr[s + 1] - rptr[s])
@@ -151,7 +143,7 @@ fn widest_pattern(sn: &SymbolicSupernodalCholesky<usize>) -> usize {
 /// The backward half of [`supernodal_solve`] for `K` interleaved columns, on the factor's
 /// columns before `stop`, the values of `w` from `stop` on taken as solved (a separator's).
 pub(super) fn supernodal_backward<const K: usize>(
-    sn: &SymbolicSupernodalCholesky<usize>,
+    sn: Layout<'_>,
     values: &[f64],
     w: &mut [f64],
     stop: usize,
@@ -170,7 +162,7 @@ pub(super) fn supernodal_backward<const K: usize>(
 /// diagonal block's rows below it.
 #[inline(always)]
 pub(super) fn supernodal_backward_plain<const K: usize>(
-    sn: &SymbolicSupernodalCholesky<usize>,
+    sn: Layout<'_>,
     values: &[f64],
     w: &mut [f64],
     stop: usize,

@@ -29,16 +29,17 @@ use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::llt::factor::{cholesky_in_place, cholesky_in_place_scratch, LltError};
 use faer::linalg::matmul::triangular::{matmul, BlockStructure};
 use faer::linalg::triangular_solve::solve_lower_triangular_in_place;
-use faer::sparse::linalg::cholesky::supernodal::SymbolicSupernodalCholesky;
 use faer::sparse::SparseColMatRef;
 use faer::{Accum, MatMut, MatRef, Par};
+
+use super::symbolic::Layout;
 
 /// The values of the factor of `a` (its lower triangle, by columns, in the factor's order)
 /// on `sn`, added into `values` (`sn.len_val()` zeros on entry). `Err(j)`: the pivot of
 /// column `j` is not positive and finite (`a` is not positive definite to working
 /// precision).
 pub(super) fn factor_values(
-    sn: &SymbolicSupernodalCholesky<usize>,
+    sn: Layout<'_>,
     a: SparseColMatRef<'_, usize, f64>,
     values: &mut [f64],
 ) -> Result<(), usize> {
@@ -51,7 +52,7 @@ pub(super) fn factor_values(
 /// [`factor_values`] for the instruction set it is inlined into.
 #[inline(always)]
 pub(super) fn factor_values_plain(
-    sn: &SymbolicSupernodalCholesky<usize>,
+    sn: Layout<'_>,
     a: SparseColMatRef<'_, usize, f64>,
     values: &mut [f64],
 ) -> Result<(), usize> {
@@ -141,7 +142,7 @@ pub(super) fn factor_values_plain(
 
 /// Bytes of [`factor_values`]'s scratch on `sn`: each column's supernode and block row, and
 /// the largest update with its packed rows (or faer's dense scratch for a wide supernode).
-pub(super) fn scratch_bytes(sn: &SymbolicSupernodalCholesky<usize>) -> u64 {
+pub(super) fn scratch_bytes(sn: Layout<'_>) -> u64 {
     let (begin, end, rptr) = (
         sn.supernode_begin(),
         sn.supernode_end(),

@@ -8,6 +8,7 @@ mod inputs;
 mod ordering;
 mod reference;
 mod supernodal;
+mod symbolic;
 mod threshold;
 
 /// [`crate::test_support::lcg`] from `seed` advanced once (the flow tests' inputs).

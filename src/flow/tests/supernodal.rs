@@ -3,8 +3,8 @@
 use super::*;
 use crate::flow::llt::llt_values;
 use crate::flow::substitution::{supernodal_solve, Supernode};
+use crate::flow::symbolic::Layout;
 use faer::dyn_stack::{MemBuffer, MemStack};
-use faer::sparse::linalg::cholesky::supernodal::SymbolicSupernodalCholesky;
 use faer::sparse::linalg::cholesky::{
     factorize_symbolic_cholesky, CholeskySymbolicParams, SymbolicCholesky, SymbolicCholeskyRaw,
     SymmetricOrdering,
@@ -16,7 +16,12 @@ use faer::{Par, Side};
 /// The lower triangle of a wrapped `ny × nx` grid's operator: face conductances `10^(-6u)`
 /// (`u` uniform), the diagonal their sum plus `shift` times the largest (negative `shift`
 /// at cell `bad`: not positive definite there).
-fn grid_operator(ny: usize, nx: usize, seed: u64, bad: Option<usize>) -> SparseColMat<usize, f64> {
+pub(super) fn grid_operator(
+    ny: usize,
+    nx: usize,
+    seed: u64,
+    bad: Option<usize>,
+) -> SparseColMat<usize, f64> {
     let n = ny * nx;
     let u = lcg(seed, 2 * n);
     let c: Vec<f64> = u.iter().map(|&v| 10f64.powf(-6.0 * v)).collect();
@@ -53,7 +58,7 @@ fn grid_operator(ny: usize, nx: usize, seed: u64, bad: Option<usize>) -> SparseC
     )
 }
 
-fn analysis(a: &SparseColMat<usize, f64>, amd: bool) -> SymbolicCholesky<usize> {
+pub(super) fn analysis(a: &SparseColMat<usize, f64>, amd: bool) -> SymbolicCholesky<usize> {
     let params = CholeskySymbolicParams {
         supernodal_flop_ratio_threshold: SupernodalThreshold::FORCE_SUPERNODAL,
         ..Default::default()
@@ -68,9 +73,9 @@ fn analysis(a: &SparseColMat<usize, f64>, amd: bool) -> SymbolicCholesky<usize> 
 }
 
 /// The supernodal structure of a supernodal analysis.
-fn supernodes(symbolic: &SymbolicCholesky<usize>) -> &SymbolicSupernodalCholesky<usize> {
+fn supernodes(symbolic: &SymbolicCholesky<usize>) -> Layout<'_> {
     match symbolic.raw() {
-        SymbolicCholeskyRaw::Supernodal(sn) => sn,
+        SymbolicCholeskyRaw::Supernodal(sn) => Layout::of_faer(sn),
         SymbolicCholeskyRaw::Simplicial(_) => panic!("a supernodal analysis"),
     }
 }
@@ -123,6 +128,7 @@ fn the_supernodal_factor_matches_faers_and_solves() {
         let SymbolicCholeskyRaw::Supernodal(sn) = symbolic.raw() else {
             panic!("a supernodal analysis")
         };
+        let sn = Layout::of_faer(sn);
         if ny == 64 {
             // Wide supernodes with rows below them: the dense factor and product.
             let wide = (0..sn.n_supernodes())
@@ -208,6 +214,7 @@ fn the_wide_and_plain_builds_give_the_same_bits() {
         let SymbolicCholeskyRaw::Supernodal(sn) = symbolic.raw() else {
             panic!("a supernodal analysis")
         };
+        let sn = Layout::of_faer(sn);
         let a = match symbolic.perm() {
             Some(p) => permuted_lower(&a, p.arrays().1),
             None => a,
