@@ -202,6 +202,10 @@ impl Supernodes {
             NONE => NONE,
             p => of[p] as usize,
         };
+        // A column's count includes its diagonal and at most every row below it.
+        if counts.iter().enumerate().any(|(j, &c)| c == 0 || c > n - j) {
+            return Err("the symbolic analysis's column counts are out of range");
+        }
         let degree: Vec<usize> = last.iter().map(|&j| counts[j] - 1).collect();
 
         // Relaxation: supernode `s` absorbs `s − 1` (itself possibly grown) when that is its
@@ -270,7 +274,11 @@ impl Supernodes {
             .collect();
 
         // Patterns: row `k` appended to every supernode of its row subtree.
-        let mut rows = vec![0usize; r];
+        // Fallible: the factor's size is checked against the memory only after this analysis.
+        let mut rows = Vec::new();
+        rows.try_reserve_exact(r)
+            .map_err(|_| "out of memory for the symbolic analysis's patterns")?;
+        rows.resize(r, 0usize);
         let mut pos = rptr[..ns].to_vec();
         let mut visited = vec![NONE; ns];
         for k in 0..n {
