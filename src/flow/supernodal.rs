@@ -1,5 +1,5 @@
-//! The numeric supernodal Cholesky factor `A = L Lᵀ` on faer's supernodal symbolic
-//! structure, in plain loops.
+//! The numeric supernodal Cholesky factor `A = L Lᵀ` on a supernodal symbolic structure
+//! (faer's, or [`super::symbolic`]'s, the same layout), in plain loops.
 //!
 //! The flow's factors have thousands of supernodes of about four to sixteen columns
 //! (docs/flow.md): faer's numeric factor dispatches a dense product per update and a dense
