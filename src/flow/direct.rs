@@ -509,10 +509,10 @@ impl Factor {
                 w0[p] = if on { cols[0].0[k] } else { 0.0 };
                 w1[p] = if on { cols[1].0[k] } else { 0.0 };
             }
-            let values = &*values;
+            let (values, sn) = (&*values, Layout::of_faer(sn));
             rayon::join(
-                || supernodal_solve(Layout::of_faer(sn), values, w0),
-                || supernodal_solve(Layout::of_faer(sn), values, w1),
+                || supernodal_solve(sn, values, w0),
+                || supernodal_solve(sn, values, w1),
             );
             for (p, &q) in fwd.iter().enumerate() {
                 if live(q) {

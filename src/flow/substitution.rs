@@ -1,7 +1,8 @@
 //! Forward and backward substitution with a supernodal Cholesky factor `L Lᵀ` (faer's
-//! layout of the structure and values, [`super::symbolic::Layout`]), in plain loops over each supernode's dense block:
-//! faer's general solve dispatches dense kernels and a temporary per supernode, and the
-//! supernodes of the flow's factors have about five columns (docs/flow.md).
+//! layout of the structure and values, [`super::symbolic::Layout`]), in plain loops over
+//! each supernode's dense block: faer's general solve dispatches dense kernels and a
+//! temporary per supernode, and the supernodes of the flow's factors have about five
+//! columns (docs/flow.md).
 
 use super::symbolic::Layout;
 

@@ -29,7 +29,7 @@ use faer::sparse::linalg::cholesky::supernodal::SymbolicSupernodalCholesky;
 /// Supernode relaxation: two supernodes of `n` columns in all whose merged block would
 /// hold a fraction `z` of explicit zeros merge when `n ≤ c.0` and `z ≤ c.1` for some `c`
 /// (faer's defaults, so that both analyses agree).
-pub(super) const RELAX: [(usize, f64); 4] = [(4, 1.0), (16, 0.8), (48, 0.1), (usize::MAX, 0.05)];
+const RELAX: [(usize, f64); 4] = [(4, 1.0), (16, 0.8), (48, 0.1), (usize::MAX, 0.05)];
 
 const NONE: usize = usize::MAX;
 
@@ -170,6 +170,11 @@ impl Supernodes {
         let parent = elimination_tree(n, upper);
         let post = postorder(&parent);
         let counts = column_counts(&parent, &post, lower);
+        drop(post);
+        // A column's count includes its diagonal and at most every row below it.
+        if counts.iter().enumerate().any(|(j, &c)| c == 0 || c > n - j) {
+            return Err("the symbolic analysis's column counts are out of range");
+        }
 
         // Fundamental supernodes.
         let mut children = vec![0u32; n];
@@ -198,21 +203,15 @@ impl Supernodes {
             c += w;
             last.push(c - 1);
         }
-        let sparent = |s: usize, of: &[u32]| match parent[last[s]] {
-            NONE => NONE,
-            p => of[p] as usize,
-        };
-        // A column's count includes its diagonal and at most every row below it.
-        if counts.iter().enumerate().any(|(j, &c)| c == 0 || c > n - j) {
-            return Err("the symbolic analysis's column counts are out of range");
-        }
         let degree: Vec<usize> = last.iter().map(|&j| counts[j] - 1).collect();
 
         // Relaxation: supernode `s` absorbs `s − 1` (itself possibly grown) when that is its
         // child and the zeros stay within `RELAX`.
         let mut zeros = vec![0usize; nf];
         for s in 1..nf {
-            if sparent(s - 1, &of) != s {
+            // `s − 1` is a child of `s` when the parent of its last column lies in `s`.
+            let p = parent[last[s - 1]];
+            if p == NONE || of[p] as usize != s {
                 continue;
             }
             let (ps, cs) = (size[s], size[s - 1]);
