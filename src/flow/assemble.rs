@@ -495,8 +495,12 @@ pub fn fine_stencil(c: &[f64], ny: usize, nx: usize, periodic: bool) -> (Stencil
     let n = ny * nx;
     let mut e = vec![0.0; n];
     let mut s = vec![0.0; n];
-    let mut dir = vec![0.0; n];
-    let mut rhs = vec![0.0; n];
+    // Nonzero on the first and last rows only, read everywhere: zeros written now (a
+    // `calloc`ed buffer would be read through the kernel's shared zero page, and its memory,
+    // reused after it is freed, faulted again where first written, each such fault a TLB
+    // flush on every core running the solve).
+    let mut dir = crate::alloc::zeroed_now(n);
+    let mut rhs = crate::alloc::zeroed_now(n);
     e.par_chunks_mut(nx)
         .zip(s.par_chunks_mut(nx))
         .zip(dir.par_chunks_mut(nx).zip(rhs.par_chunks_mut(nx)))
