@@ -5,7 +5,6 @@ module."""
 
 from __future__ import annotations
 
-import io
 import math
 import os
 from collections.abc import Sequence
@@ -14,9 +13,9 @@ from typing import Any
 
 import numpy as np
 
-from .._io import atomic_write_bytes
 from ..ensemble._params import _format_value
 from ..ensemble._stats import CONFIDENCE
+from .paper import save_figure
 
 PathLike = str | os.PathLike[str]
 
@@ -209,9 +208,5 @@ def save_ensemble_figures(
         ("fig3_vpg_moments", figure_vpg_moments),
         ("thresholds_hist", figure_threshold_histograms),
     ):
-        fig = make(result)
-        for fmt in formats:
-            buf = io.BytesIO()
-            fig.savefig(buf, format=fmt, dpi=dpi)
-            paths.append(atomic_write_bytes(directory / f"{stem}.{fmt}", buf.getvalue()))
+        paths += save_figure(make(result), directory / stem, formats, dpi)
     return paths

@@ -313,14 +313,27 @@ def save_figure(
     """Render ``fig`` to ``stem.<fmt>`` for every format, each file written atomically.
 
     ``tight`` crops to the drawn artists (``bbox_inches="tight"``), for figures with
-    content outside their axes grid such as the class maps' legend.
+    content outside their axes grid such as the class maps' legend. The figure's layout
+    engine (constrained layout) places the axes for the first format; the other formats
+    reuse those positions, in figure fractions, instead of measuring every label again
+    (about a seventh of ``leakpath paper``'s time). The engine is back on the figure
+    afterwards.
     """
     extra: dict[str, Any] = {"bbox_inches": "tight", "pad_inches": 0.08} if tight else {}
+    engine = fig.get_layout_engine()
     paths = []
-    for fmt in formats:
-        buf = io.BytesIO()
-        fig.savefig(buf, format=fmt, dpi=dpi, **extra)
-        paths.append(atomic_write_bytes(stem.with_name(f"{stem.name}.{fmt}"), buf.getvalue()))
+    try:
+        for i, fmt in enumerate(formats):
+            buf = io.BytesIO()
+            fig.savefig(buf, format=fmt, dpi=dpi, **extra)
+            paths.append(
+                atomic_write_bytes(stem.with_name(f"{stem.name}.{fmt}"), buf.getvalue())
+            )
+            if i == 0 and engine is not None:
+                fig.set_layout_engine("none")
+    finally:
+        if engine is not None:
+            fig.set_layout_engine(engine)
     return paths
 
 

@@ -7,7 +7,6 @@ are listed in :data:`DIMENSIONLESS`.
 
 from __future__ import annotations
 
-import io
 import math
 import os
 from collections.abc import Mapping, Sequence
@@ -16,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from .._io import atomic_write_bytes, atomic_write_text, csv_text, dumps
+from .._io import atomic_write_text, csv_text, dumps
 
 __all__ = ["Table", "SealResult", "UNIT_SUFFIXES", "DIMENSIONLESS"]
 
@@ -188,9 +187,7 @@ class SealResult:
         paths.append(atomic_write_text(d / "metadata.json", dumps(self.metadata)))
         fig_dir = d / "figures"
         fig_dir.mkdir(exist_ok=True)
-        fig = self.plot()
-        for fmt in ("png", "pdf"):
-            buf = io.BytesIO()
-            fig.savefig(buf, format=fmt, dpi=150)
-            paths.append(atomic_write_bytes(fig_dir / f"seal.{fmt}", buf.getvalue()))
+        from ..plotting.paper import save_figure
+
+        paths += save_figure(self.plot(), fig_dir / "seal", ("png", "pdf"), 150)
         return paths
