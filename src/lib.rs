@@ -13,6 +13,7 @@ pub mod clusters;
 pub mod contact;
 pub mod dense_scratch;
 pub mod elastic;
+pub mod elementary;
 pub mod error;
 pub mod flow;
 pub mod grid;

@@ -219,6 +219,18 @@ class FlowSolution:
     def labelled(self) -> bool:
         """True when the solve labelled the open cells itself (no ``labels`` given)."""
 
+def elementary(
+    values: npt.NDArray[np.float64],
+    function: _Literal["power", "exp", "log", "log10", "cbrt"],
+    exponent: float | None = None,
+) -> npt.NDArray[np.float64]:
+    """``function`` of every value of a contiguous 1-D float64 array (``"power"``: ``x**exponent``),
+    each by one scalar function whatever the CPU (the C library's ``pow``, ``exp``, ``log``,
+    ``log10``; leakpath's own ``cbrt``): the same bits on every CPU, where numpy's own loops
+    use SVML on CPUs with AVX-512. A new array.
+    ``InvalidArgumentError`` (``function``) for another name, or an exponent given with a
+    function other than ``"power"`` (or missing with it)."""
+
 def kernel_table(
     ny: int, nx: int, dx: float, e_star: float, memory_limit: int | None = None
 ) -> npt.NDArray[np.float64]:

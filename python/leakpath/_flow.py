@@ -39,7 +39,7 @@ from typing import Any
 
 import numpy as np
 
-from . import _core, _validate
+from . import _core, _elementary, _validate
 from ._memory import memory_limit as default_memory_limit
 from .errors import InvalidArgumentError
 
@@ -550,7 +550,7 @@ def flow(
         inlet_flow_rate=q_in,
         conductance=conductance,
         permeability=permeability,
-        hydraulic_aperture=float(np.cbrt(12.0) * np.cbrt(permeability)),
+        hydraulic_aperture=float(_elementary.cbrt(12.0) * _elementary.cbrt(permeability)),
         pressure=pressure,
         flux_axis0=f0,
         flux_axis1=f1,

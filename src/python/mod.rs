@@ -15,6 +15,7 @@ use crate::error::Error;
 
 mod clusters;
 mod contact;
+mod elementary;
 mod errors;
 mod flow;
 mod pools;
@@ -237,6 +238,7 @@ fn dense_scratch_bytes() -> u64 {
 fn core_module(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add_function(wrap_pyfunction!(kernel_table, m)?)?;
+    m.add_function(wrap_pyfunction!(elementary::elementary, m)?)?;
     m.add_class::<contact::ContactProblem>()?;
     m.add_class::<contact::PySolution>()?;
     m.add_class::<contact::PyCoarseCost>()?;

@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from .. import _elementary
 from .._io import atomic_write_text
 from ..leakage import flow_axis_for
 from ._layout import _csv
@@ -97,7 +98,7 @@ def log_k_on_grid(
     out = np.full(grid.shape, np.nan)
     if ok.sum() == 0:
         return out
-    a_ok, y_ok = a[ok], np.log10(k[ok])
+    a_ok, y_ok = a[ok], _elementary.log10(k[ok])
     order = np.argsort(a_ok, kind="stable")
     a_ok, y_ok = a_ok[order], y_ok[order]
     inside = (grid >= a_ok[0]) & (grid <= a_ok[-1])

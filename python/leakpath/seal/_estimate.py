@@ -33,6 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from .. import _elementary
 from ..errors import InvalidArgumentError
 from ._theory import _bruggeman_rows
 
@@ -204,7 +205,7 @@ def effective_permeability(
     else:
         small = float(ka.min())  # k_min/k <= 1: no overflow
         harmonic = float(n / np.sum(small / ka)) * small
-        geometric = float(np.exp(np.mean(np.log(ka))))
+        geometric = float(_elementary.exp(np.mean(_elementary.log(ka))))
     value = float(_self_consistent(ka)[0])
     # Rounding can put the root a few ulps outside the bounds it provably lies between.
     value = min(max(value, harmonic), arithmetic)

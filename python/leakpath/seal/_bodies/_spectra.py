@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from ... import _validate
+from ... import _elementary, _validate
 from ..._validate import invalid
 from ...moments import rms_slope as _fd_rms_slope
 from ...surfaces import Surface, load
@@ -40,7 +40,9 @@ class _PowerLaw:
         out[flat] = self.c[0]
         band = (qa >= lo * (1 - _EDGE)) & (qa <= hi * (1 + _EDGE))
         qb = np.clip(qa[band], lo, hi)
-        out[band] = np.exp(np.interp(np.log(qb), np.log(self.q), np.log(self.c)))
+        out[band] = _elementary.exp(
+            np.interp(_elementary.log(qb), _elementary.log(self.q), _elementary.log(self.c))
+        )
         return out
 
     def moment(self, a: int) -> float:
