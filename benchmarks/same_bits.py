@@ -1,9 +1,11 @@
 """Fingerprints of one surface → contact → flow pipeline, to compare two CPUs bit for bit.
 
 Prints SHA-256 prefixes of a spectral surface's heights, its contact solution (gap and
-pressure, Polonsky–Keer at Δ = 2 h_s) and its flow (pressure field; Cholesky), with the flow
-rate in full. Run it on two machines, or on one natively and under user-mode emulation of
-a CPU without AVX-512, and compare the lines (docs/conventions.md, "The same numbers on every
+pressure, Polonsky–Keer at Δ = 2 h_s) and its flow (pressure field; Cholesky and multigrid),
+with the flow rates, percolating volume and Nayak moments in full; then the exact contact
+solvers (active set, Lawson–Hanson) and load control on a surface half as wide. Run it on
+two machines, or on one natively and under user-mode emulation of a CPU without AVX-512,
+and compare the lines (docs/conventions.md, "The same numbers on every
 machine")::
 
     python benchmarks/same_bits.py > native.txt
@@ -46,6 +48,22 @@ def main() -> None:
     f = leakpath.flow(state, solver="cholesky")
     print(f"flow pressure: {fingerprint(f.pressure)}")
     print(f"flow rate [{s.unit}³/s at η = Δp = 1]: {f.flow_rate!r}")
+    g = leakpath.flow(state, solver="multigrid")
+    print(f"flow by multigrid: {fingerprint(g.pressure)} {g.flow_rate!r}")
+    print(f"percolating volume [{s.unit}³]: {state.percolating_volume!r}")
+    m = leakpath.nayak_moments(state.deformed, s.dx)
+    u = s.unit
+    print(f"deformed surface: m0 {m.m0!r} {u}², m2 {m.m2!r}, m4 {m.m4!r} {u}⁻², α {m.alpha!r}")
+    # The exact solvers (dense Cholesky of the contact block) and load control, smaller.
+    small = leakpath.spectral(a.size // 2 + 1, 0.8, seed=a.seed)
+    problem = leakpath.ContactProblem(small, E=1.0, nu=0.3, boundary="periodic")
+    delta = 1.5 * float(np.std(small.heights))
+    for solver in ("active-set", "lawson-hanson"):
+        st = problem.solve(delta, solver=solver)
+        print(f"{solver}: {fingerprint(st.gap, st.pressure)} load {st.load!r} E·{u}²")
+    st = problem.solve(mean_pressure=0.01, solver="polonsky-keer")
+    fp = fingerprint(st.gap, st.pressure)
+    print(f"load control (p̄ = 0.01 E): {fp} approach {st.approach!r} {u}")
 
 
 if __name__ == "__main__":

@@ -7,8 +7,8 @@
 //! computed from it different last digits, on an AVX-512 machine than on an AVX2 one. [`apply`]
 //! computes every element with one scalar function whatever the CPU and the thread count:
 //! the C library's `pow`, `exp`, `log` and `log10` (Rust's `powf`, `exp`, `ln` and `log10`
-//! call them; glibc chooses among its builds of these by the CPU's fused multiply-add, which
-//! every x86-64 CPU since 2013 has, not by its vector width), and for `cbrt` the
+//! call them; glibc picks among its builds of these by whether the CPU has FMA and AVX2,
+//! as the x86-64 CPUs of the last decade do, never by AVX-512), and for `cbrt` the
 //! implementation compiled into leakpath itself (Rust's, a port of musl's). The Python side
 //! reaches the same bits everywhere through it (`leakpath/_elementary.py`).
 
