@@ -116,3 +116,36 @@ def test_spectral_heights_use_the_c_librarys_pow():
     h -= h.mean()
     h *= 1.5 / float(np.sqrt(np.mean(h * h)))
     np.testing.assert_array_equal(s.heights, h)
+
+
+# numpy float64 functions that run through SVML on CPUs with AVX-512 (their bits differ from
+# the C library's there); `**` with an exponent other than 2 on an array is numpy's `power`.
+_VECTORISED = {
+    "power", "float_power", "exp", "exp2", "expm1", "log", "log2", "log10", "log1p", "cbrt",
+    "arctan2", "arcsin", "arccos", "arctan", "sinh", "cosh", "tan", "arcsinh", "arccosh",
+    "arctanh",
+}
+
+
+def test_no_numeric_module_calls_numpys_vectorised_elementary_functions():
+    """The modules that compute numbers (not the figures') call these through
+    ``leakpath._elementary``: a regression guard read from the source (calls by name only;
+    ``x ** y`` on an array is not seen here, the spectral test above covers the generator's)."""
+    import ast
+    from pathlib import Path
+
+    root = Path(leakpath.__file__).parent
+    found = []
+    for path in root.rglob("*.py"):
+        if "plotting" in path.parts:
+            continue
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if (
+                isinstance(node, ast.Call)
+                and isinstance(node.func, ast.Attribute)
+                and isinstance(node.func.value, ast.Name)
+                and node.func.value.id in ("np", "numpy")
+                and node.func.attr in _VECTORISED
+            ):
+                found.append(f"{path.relative_to(root)}:{node.lineno} np.{node.func.attr}")
+    assert not found, found
