@@ -326,7 +326,7 @@ impl Factor {
         let (mut t_order, mut t_symbolic, mut t_matrix) = (0.0, 0.0, 0.0);
         // The whole matrix, unless the analysis is in halves (each builds its own).
         let whole_matrix = |on: &[usize]| {
-            let (col_ptr, row_idx, vals) = lower_csc(st, on, |l| index[l]);
+            let (col_ptr, row_idx, vals) = lower_csc(st, on);
             let pattern = SymbolicSparseColMat::new_checked(m, m, col_ptr, None, row_idx);
             SparseColMat::new(pattern, vals)
         };
@@ -334,7 +334,7 @@ impl Factor {
             Some(an) => {
                 let matrices = match &an.structure {
                     Structure::Whole(_) => Matrices::Whole(whole_matrix(&an.cells)),
-                    Structure::Halves(h) => Matrices::Halves(h.matrices(st, &index, &an.cells)),
+                    Structure::Halves(h) => Matrices::Halves(h.matrices(st, &an.cells)),
                 };
                 t_matrix = cg::secs(t0);
                 (an, matrices)
@@ -352,7 +352,7 @@ impl Factor {
                 let t0 = std::time::Instant::now();
                 let (structure, matrices) = match halved {
                     Some(cut) => {
-                        let (h, mats) = halves::Analysis::new(st, &index, &cells, &fwd, cut)?;
+                        let (h, mats) = halves::Analysis::new(st, &cells, &fwd, cut)?;
                         // The sides' matrices are built with their analyses.
                         t_symbolic = cg::secs(t0);
                         (Structure::Halves(h), Matrices::Halves(mats))

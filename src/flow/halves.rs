@@ -111,11 +111,9 @@ type Lower = SparseColMat<usize, f64>;
 impl Analysis {
     /// The analysis for unknowns `cells` (grid cell of each) ordered `order` whose first
     /// `cut.0` and next `cut.1` unknowns are the two sides of the separator that follows:
-    /// the two sides' matrices (for [`Factor::new`]) with it. `index`: grid cell →
-    /// unknown.
+    /// the two sides' matrices (for [`Factor::new`]) with it.
     pub fn new(
         st: &Stencil,
-        index: &[usize],
         cells: &[usize],
         order: &[usize],
         cut: (usize, usize),
@@ -126,11 +124,9 @@ impl Analysis {
         for (p, &q) in order.iter().enumerate() {
             place[q] = p as u32;
         }
-        let side = |own: &[usize], first: usize| -> Result<(SideAnalysis, Lower)> {
+        let side = |own: &[usize]| -> Result<(SideAnalysis, Lower)> {
             let unknowns: Vec<usize> = own.iter().chain(sep).copied().collect();
-            let a = side_matrix(st, index, cells, &unknowns, |q| {
-                local(place[q] as usize, first, own.len(), na + nb)
-            });
+            let a = side_matrix(st, cells, &unknowns);
             // The side's own order: its matrix is built in elimination order.
             let symbolic = Supernodes::analyse(
                 unknowns.len(),
@@ -147,7 +143,7 @@ impl Analysis {
                 a,
             ))
         };
-        let (a, b) = rayon::join(|| side(&order[..na], 0), || side(&order[na..na + nb], na));
+        let (a, b) = rayon::join(|| side(&order[..na]), || side(&order[na..na + nb]));
         let ((sa, ma), (sb, mb)) = (a?, b?);
         Ok((
             Analysis {
@@ -160,15 +156,12 @@ impl Analysis {
     }
 
     /// The two sides' matrices of the operator `st` on this analysis's unknowns.
-    pub fn matrices(&self, st: &Stencil, index: &[usize], cells: &[usize]) -> [Lower; 2] {
+    pub fn matrices(&self, st: &Stencil, cells: &[usize]) -> [Lower; 2] {
         let [sa, sb] = &self.sides;
-        let sep0 = sa.own + sb.own;
-        let at = |sd: &SideAnalysis, first: usize| {
-            side_matrix(st, index, cells, &sd.unknowns, |q| {
-                local(self.place[q] as usize, first, sd.own, sep0)
-            })
-        };
-        let (a, b) = rayon::join(|| at(sa, 0), || at(sb, sa.own));
+        let (a, b) = rayon::join(
+            || side_matrix(st, cells, &sa.unknowns),
+            || side_matrix(st, cells, &sb.unknowns),
+        );
         [a, b]
     }
 
@@ -198,37 +191,14 @@ impl Analysis {
     }
 }
 
-/// The lower triangle of `A[unknowns, unknowns]` in the order of `unknowns`.
-/// `local(q)`: the unknown's position in the side's matrix, `usize::MAX` off the side.
-fn side_matrix(
-    st: &Stencil,
-    index: &[usize],
-    cells: &[usize],
-    unknowns: &[usize],
-    local: impl Fn(usize) -> usize,
-) -> Lower {
+/// The lower triangle of `A[unknowns, unknowns]` in the order of `unknowns` (unknown `q` on
+/// grid cell `cells[q]`).
+fn side_matrix(st: &Stencil, cells: &[usize], unknowns: &[usize]) -> Lower {
     let side_cells: Vec<usize> = unknowns.iter().map(|&q| cells[q]).collect();
-    let (col_ptr, row_idx, vals) = lower_csc(st, &side_cells, |l| match index[l] {
-        usize::MAX => usize::MAX,
-        q => local(q),
-    });
+    let (col_ptr, row_idx, vals) = lower_csc(st, &side_cells);
     let m = unknowns.len();
     let pattern = SymbolicSparseColMat::new_checked(m, m, col_ptr, None, row_idx);
     SparseColMat::new(pattern, vals)
-}
-
-/// The position in a side's matrix of the unknown at position `p` of the elimination order
-/// `[A, B, S]`: the side's own unknowns are at `first..first + own`, the separator's from
-/// `sep0`, after them in the side's matrix; `usize::MAX` for the other side's.
-#[inline]
-fn local(p: usize, first: usize, own: usize, sep0: usize) -> usize {
-    if p >= sep0 {
-        own + (p - sep0)
-    } else if p >= first && p < first + own {
-        p - first
-    } else {
-        usize::MAX
-    }
 }
 
 /// `LEAKPATH_FLOW_PROFILE`'s lines for a side: its supernodes by width (powers of two), the
@@ -445,7 +415,7 @@ mod tests {
             let m = cells.len();
             let (order, cut) = crate::flow::order::nd_order(&st, &index, m);
             let cut = cut.expect("a top cut");
-            let (an, mats) = Analysis::new(&st, &index, &cells, &order, cut).unwrap();
+            let (an, mats) = Analysis::new(&st, &cells, &order, cut).unwrap();
             let mut f = Factor::new(&an, mats).unwrap();
             let b2: Vec<f64> = crate::flow::tests::lcg(6, n)
                 .iter()
