@@ -26,6 +26,7 @@ import pytest
 from test_flow import _reference
 
 import leakpath
+from leakpath import _core
 from leakpath._flow import GAP_FLOOR, ROUND_OFF, _prepare_gaps
 from leakpath.errors import InvalidArgumentError, NotConvergedError
 
@@ -276,6 +277,29 @@ def test_gap_preparation_follows_its_definition(seed):
     else:
         got = _prepare_gaps(gap, contact)
         np.testing.assert_array_equal(got, want)
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_the_free_gaps_extremes_are_numpys_masked_reductions(seed):
+    # The core's one pass against numpy's reductions with a `where=` mask, on grids of one
+    # cell to several of the core's chunks, masks with no, some and every cell in contact,
+    # and a transposed (not C-contiguous) gap.
+    rng = np.random.default_rng(seed)
+    shape = [(1, 1), (3, 7), (300, 700), (257, 1031)][seed % 4]
+    gap = rng.normal(size=shape)
+    if seed % 2:
+        gap = np.ascontiguousarray(gap.T).T
+    for frac in (0.0, 0.4, 1.0):
+        contact = rng.random(shape) < frac
+        want = (
+            float(np.min(gap, where=~contact, initial=np.inf)),
+            float(np.max(gap, where=~contact, initial=-np.inf)),
+        )
+        assert _core.free_gap_extremes(gap, contact) == want
+    assert _core.free_gap_extremes(gap) == (float(gap.min()), float(gap.max()))
+    with pytest.raises(InvalidArgumentError, match="shape") as e:
+        _core.free_gap_extremes(gap, np.zeros((shape[0] + 1, shape[1]), dtype=bool))
+    assert e.value.argument == "contact"
 
 
 def _plates(ny: int, nx: int, g: float, eta: float, dp: float) -> float:

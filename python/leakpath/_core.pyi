@@ -371,6 +371,13 @@ def classify(
     work only, no labelling. Wrap along a flow axis is a ``ValueError`` (a periodic surface
     wraps across the flow)."""
 
+def free_gap_extremes(
+    gap: npt.NDArray[np.float64], contact: npt.NDArray[np.bool_] | None = None
+) -> tuple[float, float]:
+    """``(min, max)`` of ``gap`` over the cells where ``contact`` is False (every cell
+    without a mask), ``(inf, -inf)`` when none is free; one parallel pass. The values are
+    expected finite (NaN is skipped). ``contact`` of another shape is refused naming it."""
+
 def solve_reynolds_flow(
     gap: npt.NDArray[np.float64],
     dx: float,

@@ -45,6 +45,7 @@ pub mod cg;
 mod compensated;
 pub mod dead_ends;
 pub mod direct;
+mod extremes;
 pub mod gth;
 mod halves;
 pub mod kept;
@@ -67,6 +68,7 @@ use assemble::fine_stencil;
 use multigrid::Multigrid;
 
 use axis0::solve_axis0;
+pub use extremes::free_gap_extremes;
 use paths::{
     available_memory, cholesky_estimate, solve_direct, solve_gth, solve_multigrid, split_direct,
     trusted,

@@ -246,3 +246,30 @@ pub(super) fn solve_reynolds_flow<'py>(
         labelled: lab_slice.is_none(),
     })
 }
+
+/// `(min, max)` of `gap` over the cells off `contact` (every cell without a mask);
+/// `(inf, -inf)` when none is free (core: `flow::free_gap_extremes`).
+#[pyfunction]
+#[pyo3(signature = (gap, contact=None))]
+pub(super) fn free_gap_extremes<'py>(
+    py: Python<'py>,
+    gap: PyReadonlyArray2<'py, f64>,
+    contact: Option<PyReadonlyArray2<'py, bool>>,
+) -> PyResult<(f64, f64)> {
+    if let Some(c) = &contact {
+        if c.shape() != gap.shape() {
+            return Err(to_py(Error::invalid(
+                "contact",
+                format!(
+                    "must have the shape of gap {:?}, got {:?}",
+                    gap.shape(),
+                    c.shape()
+                ),
+            )));
+        }
+    }
+    let g = row_major(&gap);
+    let c = contact.as_ref().map(row_major);
+    let (g, c): (&[f64], Option<&[bool]>) = (&g, c.as_deref());
+    Ok(py.detach(|| flow::free_gap_extremes(g, c)))
+}

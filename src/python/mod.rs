@@ -254,6 +254,7 @@ fn core_module(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<flow::FlowSolution>()?;
     m.add_class::<flow::FlowAnalysis>()?;
     m.add_function(wrap_pyfunction!(flow::solve_reynolds_flow, m)?)?;
+    m.add_function(wrap_pyfunction!(flow::free_gap_extremes, m)?)?;
     m.add_function(wrap_pyfunction!(solver_threads, m)?)?;
     m.add_function(wrap_pyfunction!(dense_scratch_bytes, m)?)?;
     Ok(())
