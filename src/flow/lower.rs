@@ -129,8 +129,9 @@ mod tests {
     use super::*;
     use crate::flow::assemble::fine_stencil;
 
-    /// Every entry against the operator written out densely from the stencil's faces
-    /// ([`Stencil::for_each_face`], each cell's four in turn): the same pattern (rows
+    /// Every entry against the operator written out densely, cell by cell, from each
+    /// cell's four faces as the stencil defines them (east, west, south, north; a wrapped
+    /// row's ends joined, a two-cell wrapped row's pair by both faces): the same pattern (rows
     /// ascending, the diagonal first, closed faces between unknowns kept as zeros) and the
     /// same values, on grids wrapped and not, rows of one, two and three cells, unknowns in
     /// a scattered order, some of them on inactive cells.

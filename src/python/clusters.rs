@@ -7,7 +7,7 @@ use pyo3::prelude::*;
 use pyo3::types::{IntoPyDict, PyInt, PyString};
 
 use super::pools::{check_threads, pool_for, run_in};
-use super::{row_major, to_py};
+use super::{check_contact_shape, row_major, to_py};
 use crate::clusters::{self, Clusters, Connectivity, Flow, FreeMask, OpenCells, Periodic};
 use crate::error::Error;
 
@@ -208,18 +208,7 @@ pub(super) fn label_open<'py>(
     let pool = pool_for(check_threads(threads)?)?;
     let [ny, nx] = [gap.shape()[0], gap.shape()[1]];
     clusters::check_grid("gap", ny, nx).map_err(to_py)?;
-    if let Some(c) = &contact {
-        if c.shape() != gap.shape() {
-            return Err(to_py(Error::invalid(
-                "contact",
-                format!(
-                    "must have the shape of gap {:?}, got {:?}",
-                    gap.shape(),
-                    c.shape()
-                ),
-            )));
-        }
-    }
+    check_contact_shape(&gap, contact.as_ref())?;
     let g = row_major(&gap);
     let g: &[f64] = &g;
     let c = contact.as_ref().map(row_major);

@@ -6,9 +6,8 @@ use pyo3::prelude::*;
 
 use super::clusters::{Axis, Labelling};
 use super::pools::{check_threads, pool_for, run_solve};
-use super::{row_major, to_py};
+use super::{check_contact_shape, row_major, to_py};
 use crate::clusters::Flow;
-use crate::error::Error;
 use crate::flow::kept::{KeptAnalysis, DEFAULT_MIN_CELLS};
 use crate::flow::{self, Options, Problem};
 
@@ -154,19 +153,7 @@ pub(super) fn solve_reynolds_flow<'py>(
     let solver = flow::Solver::parse(solver).map_err(to_py)?;
     let pool = pool_for(check_threads(threads)?)?;
     let [ny, nx] = [gap.shape()[0], gap.shape()[1]];
-    if let Some(c) = &contact {
-        if c.shape() != gap.shape() {
-            return Err(to_py(Error::invalid(
-                "contact",
-                format!(
-                    "must have the shape of gap {:?}, got {:?}; pass the contact mask of \
-                     this gap",
-                    gap.shape(),
-                    c.shape()
-                ),
-            )));
-        }
-    }
+    check_contact_shape(&gap, contact.as_ref())?;
     let g = row_major(&gap);
     let g: &[f64] = &g;
     let c = contact.as_ref().map(row_major);
@@ -256,18 +243,7 @@ pub(super) fn free_gap_extremes<'py>(
     gap: PyReadonlyArray2<'py, f64>,
     contact: Option<PyReadonlyArray2<'py, bool>>,
 ) -> PyResult<(f64, f64)> {
-    if let Some(c) = &contact {
-        if c.shape() != gap.shape() {
-            return Err(to_py(Error::invalid(
-                "contact",
-                format!(
-                    "must have the shape of gap {:?}, got {:?}",
-                    gap.shape(),
-                    c.shape()
-                ),
-            )));
-        }
-    }
+    check_contact_shape(&gap, contact.as_ref())?;
     let g = row_major(&gap);
     let c = contact.as_ref().map(row_major);
     let (g, c): (&[f64], Option<&[bool]>) = (&g, c.as_deref());

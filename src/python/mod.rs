@@ -161,6 +161,26 @@ fn default_memory_limit(py: Python<'_>) -> PyResult<u64> {
         .extract()
 }
 
+/// `contact` (when given) has the shape of `gap`, else `InvalidArgumentError` naming
+/// `contact`.
+fn check_contact_shape(
+    gap: &numpy::PyReadonlyArray2<'_, f64>,
+    contact: Option<&numpy::PyReadonlyArray2<'_, bool>>,
+) -> PyResult<()> {
+    use numpy::PyUntypedArrayMethods;
+    match contact {
+        Some(c) if c.shape() != gap.shape() => Err(to_py(Error::invalid(
+            "contact",
+            format!(
+                "must have the shape of gap {:?}, got {:?}; pass the contact mask of this gap",
+                gap.shape(),
+                c.shape()
+            ),
+        ))),
+        _ => Ok(()),
+    }
+}
+
 /// Row-major values of a 2-D array, copied only when it is not C-contiguous (`as_slice` alone
 /// also accepts Fortran-contiguous arrays, whose memory order is column-major).
 fn row_major<'a, T: numpy::Element + Copy>(

@@ -314,7 +314,7 @@ def bruggeman_permeability(
     gmax = float(g[open_].max())
     ghat = np.zeros(g.shape)
     ghat[open_] = np.maximum(g[open_] / gmax, GAP_FLOOR)
-    g = ghat.ravel()
-    khat = g * g * g  # products, not numpy's pow: the same bits on every CPU
+    gh = ghat.ravel()
+    khat = gh * gh * gh  # products, not numpy's pow: the same bits on every CPU
     root = float(_bruggeman_rows(khat)[0])
     return root * (gmax**3 / 12.0)
