@@ -69,6 +69,7 @@ pub(super) fn solve_axis0(
 ) -> Result<UnitSolution> {
     let n = ny * nx;
     let t_start = std::time::Instant::now();
+    cg::mark("arguments to the unit solve");
     let gref = g.par_iter().cloned().reduce(|| 0.0, f64::max);
     // The conductances `(g / g_ref)³` in the gap's own buffer.
     let mut c = g;
@@ -102,6 +103,7 @@ pub(super) fn solve_axis0(
         None => clusters::label(&open, ny, nx, Connectivity::Four, per)?,
     };
     drop(open);
+    cg::mark("open cells and labels");
     // Touch flags per cluster: 1 inlet row, 2 outlet row.
     let mut touch = vec![0u8; k + 1];
     for j in 0..nx {
@@ -134,6 +136,7 @@ pub(super) fn solve_axis0(
         c[k as usize] = 0.0;
     }
     let n_unknowns = class.par_iter().filter(|&&t| t == 3).count();
+    cg::mark("dead ends");
     if cg::profiling() {
         eprintln!(
             "flow: dead ends {:.3} s ({} cells, {} unknowns)",
@@ -155,6 +158,7 @@ pub(super) fn solve_axis0(
     let (c_in, c_out) = (c[..nx].to_vec(), c[(ny - 1) * nx..].to_vec());
     drop(c);
     let max_iter = opts.max_iter.unwrap_or(DEFAULT_MAX_ITER);
+    cg::mark("stencil");
     let prof = cg::profiling();
     if prof {
         eprintln!(
@@ -251,6 +255,7 @@ pub(super) fn solve_axis0(
     let (x, psi) = (ByCell::new(x, &index), ByCell::new(psi, &index));
     drop((rhs, b_out));
     let t_post = std::time::Instant::now();
+    cg::mark("to the pressures");
     let st = &st;
     // Pressures: solution on spanning cells, reservoir pressure on one-sided clusters.
     let anchored = |k: usize| {
@@ -365,6 +370,7 @@ pub(super) fn solve_axis0(
     } else {
         0.0
     };
+    cg::mark("pressures, fluxes, conservation");
     if prof {
         eprintln!(
             "flow: pressures, fluxes, conservation {:.3} s",
@@ -445,7 +451,9 @@ fn factored(
     let trust = paths::direct_trust(opts.tol);
     let trusted = factor.ok().and_then(|mut f| {
         let t0 = std::time::Instant::now();
+        cg::mark("factor");
         let a = solve_direct(&mut f, fine, rhs, b_out);
+        cg::mark("first solve, residuals, checks");
         let t_solve = cg::secs(t0);
         let t0 = std::time::Instant::now();
         let ok = trusted(&a, trust);
@@ -463,6 +471,7 @@ fn factored(
         }
         let t0 = std::time::Instant::now();
         let a = split_direct(&mut f, fine, rhs, b_out, a, trust);
+        cg::mark("refinement");
         let ok = trusted(&a, trust);
         if prof {
             let (_, (e_out, e_in)) = a.rate_errors();

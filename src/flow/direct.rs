@@ -388,6 +388,7 @@ impl Factor {
             }
         };
         drop(index);
+        cg::mark("matrices, order, symbolic analysis");
         let live = reused.then(|| analysis.cells.iter().map(|&k| st.active[k]).collect());
         let t0 = std::time::Instant::now();
         let par = Par::Seq;

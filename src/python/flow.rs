@@ -150,6 +150,7 @@ pub(super) fn solve_reynolds_flow<'py>(
             ))
         }
     };
+    crate::flow::cg::mark("");
     let solver = flow::Solver::parse(solver).map_err(to_py)?;
     let pool = pool_for(check_threads(threads)?)?;
     let [ny, nx] = [gap.shape()[0], gap.shape()[1]];
@@ -209,6 +210,7 @@ pub(super) fn solve_reynolds_flow<'py>(
         })
         .map_err(to_py)?;
     let seconds = start.elapsed().as_secs_f64();
+    crate::flow::cg::mark("wrapped in Python");
     Ok(FlowSolution {
         pressure: PyArray1::from_vec(py, sol.pressure)
             .reshape([ny, nx])?
