@@ -78,6 +78,28 @@ impl Stencil {
         debug_assert_eq!(self.d.len(), ny * nx);
     }
 
+    /// Closes the cells `cells` (they carry no unknown): their faces and their reservoir
+    /// conductances set to 0, then the diagonal and the active cells recomputed
+    /// ([`Stencil::finish_diagonal`]). The result is, bit for bit, the stencil of
+    /// conductances that are 0 on those cells ([`fine_stencil`]: a face with a closed cell
+    /// on either side is 0), so a stencil can be built before the cells to close are known.
+    pub fn close_cells(&mut self, cells: impl IntoIterator<Item = usize>) {
+        let nx = self.nx;
+        for k in cells {
+            let (i, j) = (k / nx, k % nx);
+            self.e[k] = 0.0;
+            self.s[k] = 0.0;
+            self.dir[k] = 0.0;
+            if let Some(w) = self.west(j) {
+                self.e[i * nx + w] = 0.0;
+            }
+            if i > 0 {
+                self.s[k - nx] = 0.0;
+            }
+        }
+        self.finish_diagonal();
+    }
+
     /// `y = A x`.
     pub fn apply(&self, x: &[f64], y: &mut [f64]) {
         let nx = self.nx;
@@ -543,6 +565,46 @@ pub fn fine_stencil(c: &[f64], ny: usize, nx: usize, periodic: bool) -> (Stencil
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Closing cells in a built stencil gives the stencil built with those cells closed, bit
+    /// for bit (faces, reservoir conductances, diagonal, active cells), on wrapped and walled
+    /// grids from one row or column up, closed cells on the reservoir rows and the wrap
+    /// included.
+    #[test]
+    fn closing_cells_as_building_them_closed() {
+        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+        let mut next = || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        for (ny, nx) in [(1, 1), (1, 5), (5, 1), (2, 2), (3, 7), (8, 6)] {
+            for periodic in [false, true] {
+                let u: Vec<f64> = (0..2 * ny * nx).map(|_| next()).collect();
+                let c = conductances(&u, 0.2, 6.0);
+                let shut: Vec<usize> = (0..ny * nx).filter(|_| next() < 0.3).collect();
+                let mut closed = c.clone();
+                for &k in &shut {
+                    closed[k] = 0.0;
+                }
+                let (want, want_rhs) = fine_stencil(&closed, ny, nx, periodic);
+                let (mut got, mut got_rhs) = fine_stencil(&c, ny, nx, periodic);
+                got.close_cells(shut.iter().copied());
+                for &k in &shut {
+                    got_rhs[k] = 0.0;
+                }
+                let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                let at = format!("{ny} × {nx}, periodic {periodic}, closed {shut:?}");
+                assert_eq!(bits(&got.e), bits(&want.e), "e, {at}");
+                assert_eq!(bits(&got.s), bits(&want.s), "s, {at}");
+                assert_eq!(bits(&got.dir), bits(&want.dir), "dir, {at}");
+                assert_eq!(bits(&got.d), bits(&want.d), "d, {at}");
+                assert_eq!(got.active, want.active, "active, {at}");
+                assert_eq!(bits(&got_rhs), bits(&want_rhs), "rhs, {at}");
+            }
+        }
+    }
 
     /// Cell conductances from pairs of `u`: closed below `closed`, else over `decades`.
     fn conductances(u: &[f64], closed: f64, decades: f64) -> Vec<f64> {

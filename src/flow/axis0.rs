@@ -124,29 +124,38 @@ pub(super) fn solve_axis0(
     drop(labels);
     // The dead ends of the spanning clusters carry no flow and sit at their anchors'
     // pressures (`dead_ends`): no unknowns there, their conductances closed.
+    // The search is sequential: the stencil of the spanning clusters is built beside it, on
+    // the other core, and the dead ends' cells are closed in it after.
     let t_dead = std::time::Instant::now();
-    let dead = if n <= dead_ends::MAX_CELLS && touch.contains(&3) {
+    let (dead, (mut fine, mut rhs)) = if n <= dead_ends::MAX_CELLS && touch.contains(&3) {
         let spanning: Vec<bool> = class.par_iter().map(|&t| t == 3).collect();
-        dead_ends::anchors(&spanning, ny, nx, periodic)
+        rayon::join(
+            || dead_ends::anchors(&spanning, ny, nx, periodic),
+            || fine_stencil(&c, ny, nx, periodic),
+        )
     } else {
-        Vec::new()
+        (Vec::new(), fine_stencil(&c, ny, nx, periodic))
     };
     for &(k, _) in &dead {
         class[k as usize] = DEAD_END;
         c[k as usize] = 0.0;
+        // The inlet's right-hand side is `2 c` on the first row, 0 elsewhere.
+        rhs[k as usize] = 0.0;
+    }
+    if !dead.is_empty() {
+        fine.close_cells(dead.iter().map(|&(k, _)| k as usize));
     }
     let n_unknowns = class.par_iter().filter(|&&t| t == 3).count();
-    cg::mark("dead ends");
+    cg::mark("dead ends and stencil");
     if cg::profiling() {
         eprintln!(
-            "flow: dead ends {:.3} s ({} cells, {} unknowns)",
+            "flow: dead ends and stencil {:.3} s ({} cells, {} unknowns)",
             cg::secs(t_dead),
             dead.len(),
             n_unknowns
         );
     }
 
-    let (fine, mut rhs) = fine_stencil(&c, ny, nx, periodic);
     // The outlet reservoir's share of the diagonal: `Q_out = b_out · φ`, and `ψ = 1 − φ` (the
     // flow reversed) solves `A ψ = b_out` with `Q_in = b_in · ψ`.
     let mut b_out: Vec<f64> = (0..n)
@@ -158,7 +167,7 @@ pub(super) fn solve_axis0(
     let (c_in, c_out) = (c[..nx].to_vec(), c[(ny - 1) * nx..].to_vec());
     drop(c);
     let max_iter = opts.max_iter.unwrap_or(DEFAULT_MAX_ITER);
-    cg::mark("stencil");
+    cg::mark("right-hand sides");
     let prof = cg::profiling();
     if prof {
         eprintln!(
