@@ -426,8 +426,9 @@ mod tests {
     use std::cell::RefCell;
 
     /// The profile's page-fault count is the process's minor faults: writing 16 MiB of
-    /// fresh memory (4,096 pages) raises it by at least half that many (huge pages or an
-    /// allocator's reuse could spare the rest), and it never falls.
+    /// fresh memory raises it by 4,096 (small pages) or at least 8 (where the kernel backs
+    /// it by huge pages); the neighbouring fields of `/proc/self/stat` (children's and major
+    /// faults, CPU ticks) do not move by that much.
     #[cfg(target_os = "linux")]
     #[test]
     fn page_faults_count_fresh_pages() {
@@ -437,7 +438,7 @@ mod tests {
         v.resize(16 << 20, 1);
         let v = std::hint::black_box(v);
         let after = page_faults();
-        assert!(after >= before + 2048, "{before} → {after} faults");
+        assert!(after >= before + 8, "{before} → {after} faults");
         assert_eq!(
             v.iter().step_by(4096).map(|&b| b as usize).sum::<usize>(),
             4096
