@@ -156,6 +156,73 @@ impl Drop for ZeroedAhead {
     }
 }
 
+/// Zeroed `f64` vectors of one length whose pages are faulted in by threads that would
+/// otherwise wait: a parallel stage whose parts end at different times hands the thread that
+/// finished first to [`ZeroedByIdle::work_while`] until the others are done. A fresh page
+/// costs microseconds on a virtual machine (docs/flow.md, "A first call stage by stage"),
+/// so vectors made there are taken later without those faults on the critical path.
+/// Whatever part of a vector no idle thread reached is zeroed when it is taken; a vector
+/// not made ahead is [`zeroed_now`].
+pub struct ZeroedByIdle {
+    len: usize,
+    /// Each vector's buffer (capacity `len`) and how many of its values are zeroed.
+    slots: Vec<std::sync::Mutex<(Vec<f64>, usize)>>,
+}
+
+/// Values an idle thread zeroes between two looks at whether it is still idle (64 KiB).
+const IDLE_CHUNK: usize = 8192;
+
+impl ZeroedByIdle {
+    /// Room for `count` vectors of `len` values, none of it touched yet.
+    pub fn new(count: usize, len: usize) -> Self {
+        ZeroedByIdle {
+            len,
+            slots: (0..count)
+                .map(|_| std::sync::Mutex::new((Vec::with_capacity(len), 0)))
+                .collect(),
+        }
+    }
+
+    /// Zeroes the vectors in order, a chunk at a time, while `busy()` says that the
+    /// stage's other parts are still running; skips a vector another thread is zeroing.
+    pub fn work_while(&self, busy: &dyn Fn() -> bool) {
+        for slot in &self.slots {
+            let Ok(mut guard) = slot.try_lock() else {
+                continue;
+            };
+            let (v, done) = &mut *guard;
+            while *done < self.len {
+                if !busy() {
+                    return;
+                }
+                let end = (*done + IDLE_CHUNK).min(self.len);
+                v.spare_capacity_mut()[*done..end]
+                    .iter_mut()
+                    .for_each(|e| _ = e.write(0.0));
+                *done = end;
+            }
+        }
+    }
+
+    /// A zeroed vector of the length given at [`ZeroedByIdle::new`]: the next one made
+    /// ahead, its remaining values zeroed here by every thread, else [`zeroed_now`].
+    pub fn take(&mut self) -> Vec<f64> {
+        use rayon::prelude::*;
+        if self.slots.is_empty() {
+            return zeroed_now(self.len);
+        }
+        let slot = self.slots.remove(0);
+        let (mut v, done) = slot.into_inner().unwrap_or_else(|e| e.into_inner());
+        v.spare_capacity_mut()[done..self.len]
+            .par_chunks_mut(1 << 16)
+            .for_each(|c| c.iter_mut().for_each(|e| _ = e.write(0.0)));
+        // SAFETY: the first `done` values were written by `work_while` (under the slot's
+        // lock, which `into_inner` has released to us) and the rest just above.
+        unsafe { v.set_len(self.len) };
+        v
+    }
+}
+
 /// A `Vec` of `n` copies of `value`, or `Error::TooLarge` when the allocator refuses.
 pub fn try_filled<T: Clone>(n: usize, value: T, what: &str) -> Result<Vec<T>> {
     let mut v = try_with_capacity(n, what)?;
@@ -235,6 +302,37 @@ mod tests {
         assert!(c.iter().all(|z| z.re == 0.0 && z.im == 0.0));
         let e: Vec<f64> = try_zeroed(0, "test").unwrap();
         assert!(e.is_empty());
+    }
+
+    /// Vectors zeroed in part, wholly or not at all by an idle thread, and more taken than
+    /// were made: every one taken is `len` zeros. The idle thread stops when told, within a
+    /// chunk, and leaves a vector another thread holds.
+    #[test]
+    fn vectors_zeroed_by_idle_threads_are_zero_however_far_they_got() {
+        let len = 3 * IDLE_CHUNK + 5;
+        for budget in [0usize, 1, 2, 5, 100] {
+            let mut z = ZeroedByIdle::new(3, len);
+            let looks = std::sync::atomic::AtomicUsize::new(0);
+            z.work_while(&|| looks.fetch_add(1, std::sync::atomic::Ordering::SeqCst) < budget);
+            let zeroed: Vec<usize> = z.slots.iter().map(|s| s.lock().unwrap().1).collect();
+            // One chunk per look: each vector is three whole chunks and a short one.
+            let expected: usize = (0..budget.min(12))
+                .map(|i| if i % 4 == 3 { 5 } else { IDLE_CHUNK })
+                .sum();
+            assert_eq!(zeroed.iter().sum::<usize>(), expected, "budget {budget}");
+            for _ in 0..4 {
+                let v = z.take();
+                assert_eq!(v.len(), len);
+                assert!(v.iter().all(|&x| x == 0.0));
+            }
+        }
+        // A vector held elsewhere is skipped.
+        let z = ZeroedByIdle::new(2, 10);
+        let held = z.slots[0].lock().unwrap();
+        z.work_while(&|| true);
+        assert_eq!(held.1, 0);
+        drop(held);
+        assert_eq!(z.slots[1].lock().unwrap().1, 10);
     }
 
     #[test]

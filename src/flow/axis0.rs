@@ -3,6 +3,8 @@
 
 use rayon::prelude::*;
 
+use crate::alloc::ZeroedByIdle;
+
 use super::*;
 
 /// The dimensionless solution for flow along axis 0 with `φ = 1` at the inlet, 0 at the outlet,
@@ -436,11 +438,14 @@ fn factored(
     let prof = cg::profiling();
     let kept = opts.analysis.filter(|k| k.applies(n));
     let prior = kept.and_then(|k| k.get());
+    // The solves' vectors (φ, ψ, their residuals and low parts), zeroed where a core
+    // waits in the factor.
+    let mut spare = ZeroedByIdle::new(6, n);
     // A kept analysis carries the fill of an earlier level's larger set of unknowns: when
     // that does not fit, this level's own (smaller) analysis may.
-    let made = match direct::Factor::new_reusing(fine, factor_room, prior.as_ref()) {
+    let made = match direct::Factor::new_reusing(fine, factor_room, prior.as_ref(), Some(&spare)) {
         Err(Error::TooLarge { .. }) if prior.is_some() => {
-            direct::Factor::new_reusing(fine, factor_room, None)
+            direct::Factor::new_reusing(fine, factor_room, None, Some(&spare))
         }
         made => made,
     };
@@ -461,7 +466,7 @@ fn factored(
     let trusted = factor.ok().and_then(|mut f| {
         let t0 = std::time::Instant::now();
         cg::mark("factor");
-        let a = solve_direct(&mut f, fine, rhs, b_out);
+        let a = solve_direct(&mut f, fine, rhs, b_out, &mut spare);
         cg::mark("first solve, residuals, checks");
         let t_solve = cg::secs(t0);
         let t0 = std::time::Instant::now();
@@ -479,7 +484,7 @@ fn factored(
             return Some(a);
         }
         let t0 = std::time::Instant::now();
-        let a = split_direct(&mut f, fine, rhs, b_out, a, trust);
+        let a = split_direct(&mut f, fine, rhs, b_out, a, trust, &mut spare);
         cg::mark("refinement");
         let ok = trusted(&a, trust);
         if prof {

@@ -50,6 +50,7 @@ use super::llt::{failed, llt_values};
 use super::lower::lower_csc;
 use super::substitution::supernodal_solve;
 use super::symbolic::Layout;
+use crate::alloc::ZeroedByIdle;
 use crate::error::{Error, Result};
 
 /// Iterative-refinement steps at most per right-hand side.
@@ -274,16 +275,19 @@ impl Factor {
     /// Orders, analyses and factors `st` on its active cells. With `memory_limit`, refuses
     /// with [`Error::TooLarge`] after the symbolic analysis when the factor would need more.
     pub fn new(st: &Stencil, memory_limit: Option<u64>) -> Result<Self> {
-        Self::new_reusing(st, memory_limit, None)
+        Self::new_reusing(st, memory_limit, None, None)
     }
 
     /// [`Factor::new`] on `kept` when it fits `st` ([`REUSE_FRACTION`], the active cells
     /// among its unknowns): no ordering nor symbolic analysis, the factor's values only.
     /// [`Factor::analysis`] gives the analysis used, to keep for the next operator.
+    /// With `idle`, a thread whose share of the factor in halves is done before the other's
+    /// zeroes its vectors meanwhile ([`ZeroedByIdle::work_while`]).
     pub fn new_reusing(
         st: &Stencil,
         memory_limit: Option<u64>,
         kept: Option<&Arc<Analysis>>,
+        idle: Option<&ZeroedByIdle>,
     ) -> Result<Self> {
         let n = st.ny * st.nx;
         let t0 = std::time::Instant::now();
@@ -416,7 +420,7 @@ impl Factor {
         let numeric = match (&analysis.structure, matrices) {
             (Structure::Whole(symbolic), Matrices::Whole(a)) => whole_numeric(symbolic, &a, par)?,
             (Structure::Halves(h), Matrices::Halves(mats)) => {
-                Numeric::Halves(halves::Factor::new(h, mats)?)
+                Numeric::Halves(halves::Factor::new(h, mats, idle)?)
             }
             _ => unreachable!("matrices built for their structure"),
         };
@@ -696,7 +700,7 @@ mod tests {
             .zip(&st2.active)
             .map(|(&v, &on)| if on { v - 0.5 } else { 0.0 })
             .collect();
-        let mut kept = Factor::new_reusing(&st2, None, Some(f1.analysis())).unwrap();
+        let mut kept = Factor::new_reusing(&st2, None, Some(f1.analysis()), None).unwrap();
         assert!(kept.reused() && halved(&kept));
         let mut fresh = Factor::new(&st2, None).unwrap();
         let mut r = vec![0.0; n];

@@ -34,12 +34,14 @@ use faer::linalg::triangular_solve::{
 };
 use faer::sparse::{SparseColMat, SymbolicSparseColMat};
 use faer::{Accum, Mat, Par};
+use std::sync::atomic::{AtomicUsize, Ordering};
 
 use super::assemble::Stencil;
 use super::llt::{failed, supernodal_values};
 use super::lower::lower_csc;
 use super::substitution::{supernodal_backward, supernodal_forward, Supernode};
 use super::symbolic::Supernodes;
+use crate::alloc::ZeroedByIdle;
 use crate::error::Result;
 
 /// Grids with at least this many unknowns are factored in halves when their order has a
@@ -105,6 +107,17 @@ impl Solved<'_> {
             self.work[1][2 * (p - oa) + c]
         } else {
             self.u[(p - oa - ob, c)]
+        }
+    }
+}
+
+/// Called by each side of the numeric factor when it is done (`done` counts them): the
+/// first has the other's remaining time to spare (the sides' flops differ by up to half),
+/// and zeroes `idle`'s vectors meanwhile.
+fn spare_time(done: &AtomicUsize, idle: Option<&ZeroedByIdle>) {
+    if done.fetch_add(1, Ordering::AcqRel) == 0 {
+        if let Some(z) = idle {
+            z.work_while(&|| done.load(Ordering::Acquire) < 2);
         }
     }
 }
@@ -244,7 +257,8 @@ fn profile_side(sa: &SideAnalysis, t_factor: f64, t_separator: f64) {
 impl Factor {
     /// Factors the two sides' matrices `m` (of [`Analysis::new`] or
     /// [`Analysis::matrices`]) at once and the separator's Schur complement after them.
-    pub fn new(an: &Analysis, m: [Lower; 2]) -> Result<Self> {
+    /// With `idle`, the side done first zeroes its vectors until the other is done.
+    pub fn new(an: &Analysis, m: [Lower; 2], idle: Option<&ZeroedByIdle>) -> Result<Self> {
         let k = an.k;
         let [ma, mb] = m;
         // `A_SS`'s lower triangle, from the first side's matrix (the same block in both).
@@ -258,6 +272,7 @@ impl Factor {
                 }
             }
         }
+        let done = AtomicUsize::new(0);
         let side = |sa: &SideAnalysis, a: Lower| -> Result<(Vec<f64>, Mat<f64>)> {
             let sn = sa.symbolic.layout();
             let t0 = std::time::Instant::now();
@@ -302,6 +317,7 @@ impl Factor {
             if super::cg::profiling() {
                 profile_side(sa, t1, t0.elapsed().as_secs_f64() - t1);
             }
+            spare_time(&done, idle);
             Ok((values, t))
         };
         let (a, b) = rayon::join(|| side(&an.sides[0], ma), || side(&an.sides[1], mb));
@@ -429,7 +445,19 @@ mod tests {
             let (order, cut) = crate::flow::order::nd_order(&st, &index, m);
             let cut = cut.expect("a top cut");
             let (an, mats) = Analysis::new(&st, &cells, &order, cut).unwrap();
-            let mut f = Factor::new(&an, mats).unwrap();
+            let mut f = Factor::new(&an, mats, None).unwrap();
+            // With vectors zeroed by the side done first: the same values, bit for bit,
+            // and the vectors zeros however far that side got.
+            let mut idle = ZeroedByIdle::new(3, n);
+            let g = Factor::new(&an, an.matrices(&st, &cells), Some(&idle)).unwrap();
+            let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            for (a, b) in f.values.iter().zip(&g.values) {
+                assert!(bits(a) == bits(b));
+            }
+            assert!(bits(f.ls.col_as_slice(0)) == bits(g.ls.col_as_slice(0)));
+            for _ in 0..3 {
+                assert!(idle.take().iter().all(|&v| v == 0.0));
+            }
             let b2: Vec<f64> = crate::flow::tests::lcg(6, n)
                 .iter()
                 .zip(&st.active)

@@ -4,7 +4,7 @@
 
 use rayon::prelude::*;
 
-use crate::alloc::{zeroed_now, ZeroedAhead};
+use crate::alloc::{ZeroedAhead, ZeroedByIdle};
 
 use super::*;
 
@@ -178,15 +178,15 @@ pub(super) fn solve_direct(
     st: &assemble::Stencil,
     b_in: &[f64],
     b_out: &[f64],
+    spare: &mut ZeroedByIdle,
 ) -> DirectAnswer {
-    let n = b_in.len();
-    let (mut x, mut psi) = (zeroed_now(n), zeroed_now(n));
+    let (mut x, mut psi) = (spare.take(), spare.take());
     let t0 = std::time::Instant::now();
     f.solve_pair(b_in, b_out, &mut x, &mut psi);
     if cg::profiling() {
         eprintln!("flow: two-column solve {:.3} s", cg::secs(t0));
     }
-    let (mut r_x, mut r_psi) = (zeroed_now(n), zeroed_now(n));
+    let (mut r_x, mut r_psi) = (spare.take(), spare.take());
     st.residual_compensated(&x, b_in, &mut r_x);
     st.residual_compensated(&psi, b_out, &mut r_psi);
     let mut a = DirectAnswer {
@@ -219,9 +219,9 @@ pub(super) fn split_direct(
     b_out: &[f64],
     mut a: DirectAnswer,
     trust: f64,
+    spare: &mut ZeroedByIdle,
 ) -> DirectAnswer {
-    let n = b_in.len();
-    a.lo = (zeroed_now(n), zeroed_now(n));
+    a.lo = (spare.take(), spare.take());
     for step in 0..DIRECT_SPLIT {
         if cg::profiling() {
             eprintln!("flow: refinement step {} in two doubles", step + 1);

@@ -230,8 +230,17 @@ fn split_refinement_matches_the_elimination_near_threshold() {
         let q_ref_in = cg::dot(&b_in, &gpsi) + cg::dot(&b_in, &gpsilo);
         assert!(rel(q_ref, q_ref_in) < 1e-13);
         let mut f = direct::Factor::new(&st, None).unwrap();
-        let a = paths::solve_direct(&mut f, &st, &b_in, &b_out);
-        let a = paths::split_direct(&mut f, &st, &b_in, &b_out, a, paths::DIRECT_TRUST);
+        let mut spare = crate::alloc::ZeroedByIdle::new(0, n * n);
+        let a = paths::solve_direct(&mut f, &st, &b_in, &b_out, &mut spare);
+        let a = paths::split_direct(
+            &mut f,
+            &st,
+            &b_in,
+            &b_out,
+            a,
+            paths::DIRECT_TRUST,
+            &mut spare,
+        );
         assert!(paths::trusted(&a, paths::DIRECT_TRUST), "seed {seed}");
         assert!(
             a.residual() < 1e-16,
