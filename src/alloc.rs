@@ -173,12 +173,14 @@ pub struct ZeroedByIdle {
 const IDLE_CHUNK: usize = 8192;
 
 impl ZeroedByIdle {
-    /// Room for `count` vectors of `len` values, none of it touched yet.
+    /// Room for `count` vectors of `len` values, none of it touched yet (as many as the
+    /// allocator grants: the others are [`zeroed_now`] when taken).
     pub fn new(count: usize, len: usize) -> Self {
         ZeroedByIdle {
             len,
             slots: (0..count)
-                .map(|_| std::sync::Mutex::new((Vec::with_capacity(len), 0)))
+                .map_while(|_| try_with_capacity(len, "a solve's vector").ok())
+                .map(|v| std::sync::Mutex::new((v, 0)))
                 .collect(),
         }
     }
