@@ -54,9 +54,10 @@ pub(super) fn llt_values(
 /// The values of the factor of `a` (lower triangle, in the factor's order) on the
 /// supernodal structure `sn` ([`super::supernodal`]).
 pub(super) fn supernodal_values(sn: Layout<'_>, a: &SparseColMat<usize, f64>) -> Result<Vec<f64>> {
-    // Zeros written here, not the kernel's zero pages: the factor adds into its values,
-    // and a zero page first read there is faulted again where it is written.
-    let mut values = crate::alloc::try_filled(sn.len_val(), 0.0, "the factor")
+    // The kernel's zeroed pages where the allocator maps fresh memory (no pass of zeros
+    // here): the factor writes each block's zeros at its first touch, so a page is first
+    // written, not read through the shared zero page and then faulted again.
+    let mut values: Vec<f64> = crate::alloc::try_zeroed(sn.len_val(), "the factor")
         .map_err(|_| failed("out of memory"))?;
     factor_values(sn, a.as_ref(), &mut values)
         .map_err(|j| failed(format!("the pivot of column {j} is not positive")))?;

@@ -35,9 +35,11 @@ use faer::{Accum, MatMut, MatRef, Par};
 use super::symbolic::Layout;
 
 /// The values of the factor of `a` (its lower triangle, by columns, in the factor's order)
-/// on `sn`, added into `values` (`sn.len_val()` zeros on entry). `Err(j)`: the pivot of
-/// column `j` is not positive and finite (`a` is not positive definite to working
-/// precision).
+/// on `sn`, written into `values` (`sn.len_val()` of them, whatever they hold on entry:
+/// each supernode's block is zeroed where it is first touched, by its first update or its
+/// own turn, so no separate pass of zeros runs over the whole factor first and the block is
+/// in cache when the factor adds into it). `Err(j)`: the pivot of column `j` is not
+/// positive and finite (`a` is not positive definite to working precision).
 pub(super) fn factor_values(
     sn: Layout<'_>,
     a: SparseColMatRef<'_, usize, f64>,
@@ -67,6 +69,8 @@ pub(super) fn factor_values_plain(
     }
     // Row of the current supernode's block of each pattern row.
     let mut local = vec![0usize; n];
+    // Whether each supernode's block still holds what `values` held on entry.
+    let mut untouched = vec![true; ns];
     let (mut update, mut packed, mut relative) = (Vec::new(), Vec::new(), Vec::new());
     let (a_ptr, a_rows, a_vals) = (a.col_ptr(), a.row_idx(), a.val());
     for s in 0..ns {
@@ -79,6 +83,10 @@ pub(super) fn factor_values_plain(
         }
         let (here, later) = values.split_at_mut(vptr[s + 1]);
         let block = &mut here[vptr[s]..];
+        if untouched[s] {
+            block.fill(0.0);
+            untouched[s] = false;
+        }
         for j in fs..ls {
             let col = &mut block[(j - fs) * nr..(j - fs + 1) * nr];
             for p in a_ptr[j]..a_ptr[j + 1] {
@@ -125,6 +133,10 @@ pub(super) fn factor_values_plain(
                 }
             }
             let tblock = &mut later[vptr[t] - vptr[s + 1]..vptr[t + 1] - vptr[s + 1]];
+            if untouched[t] {
+                tblock.fill(0.0);
+                untouched[t] = false;
+            }
             for qq in q..q_end {
                 let col = &mut tblock[(pattern[qq] - ft) * ntr..];
                 for (&r, &v) in relative[qq - q..]

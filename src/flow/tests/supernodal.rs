@@ -219,11 +219,15 @@ fn the_wide_and_plain_builds_give_the_same_bits() {
             Some(p) => permuted_lower(&a, p.arrays().1),
             None => a,
         };
-        let (mut wide, mut plain) = (vec![0.0; sn.len_val()], vec![0.0; sn.len_val()]);
+        // Whatever the values held on entry (zeros, or NaN): the same factor.
+        let (mut wide, mut plain) = (vec![0.0; sn.len_val()], vec![f64::NAN; sn.len_val()]);
         factor_values(sn, a.as_ref(), &mut wide).unwrap();
         factor_values_plain(sn, a.as_ref(), &mut plain).unwrap();
         let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
         assert_eq!(bits(&wide), bits(&plain), "{ny}×{nx}: factor");
+        let mut stale = vec![f64::NAN; sn.len_val()];
+        factor_values(sn, a.as_ref(), &mut stale).unwrap();
+        assert_eq!(bits(&stale), bits(&wide), "{ny}×{nx}: factor over NaN");
         let n = ny * nx;
         let b = lcg(9, 2 * n);
         let (mut w1, mut p1) = (b[..n].to_vec(), b[..n].to_vec());
