@@ -165,7 +165,8 @@ impl Drop for ZeroedAhead {
 /// not made ahead is [`zeroed_now`].
 pub struct ZeroedByIdle {
     len: usize,
-    /// Each vector's buffer (capacity `len`) and how many of its values are zeroed.
+    /// Each vector's buffer (capacity `len` once allocated) and how many of its values
+    /// are zeroed.
     slots: Vec<std::sync::Mutex<(Vec<f64>, usize)>>,
 }
 
@@ -173,14 +174,14 @@ pub struct ZeroedByIdle {
 const IDLE_CHUNK: usize = 8192;
 
 impl ZeroedByIdle {
-    /// Room for `count` vectors of `len` values, none of it touched yet (as many as the
-    /// allocator grants: the others are [`zeroed_now`] when taken).
+    /// `count` vectors of `len` values to come, nothing allocated yet: an idle thread
+    /// allocates each where it starts zeroing it (a reservation made earlier would change
+    /// where the stages before put their memory, and reuse less of it).
     pub fn new(count: usize, len: usize) -> Self {
         ZeroedByIdle {
             len,
             slots: (0..count)
-                .map_while(|_| try_with_capacity(len, "a solve's vector").ok())
-                .map(|v| std::sync::Mutex::new((v, 0)))
+                .map(|_| std::sync::Mutex::new((Vec::new(), 0)))
                 .collect(),
         }
     }
@@ -193,6 +194,10 @@ impl ZeroedByIdle {
                 continue;
             };
             let (v, done) = &mut *guard;
+            // A room the allocator refuses is left to `take`.
+            if v.capacity() < self.len && v.try_reserve_exact(self.len).is_err() {
+                return;
+            }
             while *done < self.len {
                 if !busy() {
                     return;
@@ -215,6 +220,9 @@ impl ZeroedByIdle {
         }
         let slot = self.slots.remove(0);
         let (mut v, done) = slot.into_inner().unwrap_or_else(|e| e.into_inner());
+        if v.capacity() < self.len {
+            return zeroed_now(self.len);
+        }
         v.spare_capacity_mut()[done..self.len]
             .par_chunks_mut(1 << 16)
             .for_each(|c| c.iter_mut().for_each(|e| _ = e.write(0.0)));
