@@ -38,7 +38,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 
 use super::assemble::Stencil;
 use super::llt::{failed, supernodal_values};
-use super::lower::lower_csc;
+use super::lower::{lower_csc, lower_csc_by};
 use super::substitution::{supernodal_backward, supernodal_forward, Supernode};
 use super::symbolic::Supernodes;
 use crate::alloc::ZeroedByIdle;
@@ -126,12 +126,13 @@ fn spare_time(done: &AtomicUsize, idle: Option<&ZeroedByIdle>) {
 type Lower = SparseColMat<usize, f64>;
 
 impl Analysis {
-    /// The analysis for unknowns `cells` (grid cell of each) ordered `order` whose first
-    /// `cut.0` and next `cut.1` unknowns are the two sides of the separator that follows:
-    /// the two sides' matrices (for [`Factor::new`]) with it.
+    /// The analysis for the unknowns of `index` (grid cell → unknown, `usize::MAX` for
+    /// none) ordered `order` whose first `cut.0` and next `cut.1` unknowns are the two
+    /// sides of the separator that follows: the two sides' matrices (for [`Factor::new`])
+    /// with it.
     pub fn new(
         st: &Stencil,
-        cells: &[usize],
+        index: &[usize],
         order: &[usize],
         cut: (usize, usize),
     ) -> Result<(Self, [Lower; 2])> {
@@ -150,7 +151,25 @@ impl Analysis {
                     span.contains(&p).then(|| (q, p - span.start))
                 })
                 .collect();
-            let a = side_matrix(st, cells, &unknowns);
+            // Grid cell → the side's column: its own unknowns, then the separator's.
+            let (own_end, sep_start) = (first + own.len(), na + nb);
+            let column = |k: usize| -> u32 {
+                let Some(&p) = index.get(k).and_then(|&q| place.get(q)) else {
+                    return u32::MAX;
+                };
+                let p = p as usize;
+                if (first..own_end).contains(&p) {
+                    (p - first) as u32
+                } else if p >= sep_start {
+                    (own.len() + p - sep_start) as u32
+                } else {
+                    u32::MAX
+                }
+            };
+            let (col_ptr, row_idx, vals) = lower_csc_by(st, unknowns.len(), column);
+            let m = unknowns.len();
+            let pattern = SymbolicSparseColMat::new_checked(m, m, col_ptr, None, row_idx);
+            let a = SparseColMat::new(pattern, vals);
             // The side's own order: its matrix is built in elimination order.
             let symbolic = Supernodes::analyse(
                 unknowns.len(),
@@ -444,7 +463,18 @@ mod tests {
             let m = cells.len();
             let (order, cut) = crate::flow::order::nd_order(&st, &index, m);
             let cut = cut.expect("a top cut");
-            let (an, mats) = Analysis::new(&st, &cells, &order, cut).unwrap();
+            let (an, mats) = Analysis::new(&st, &index, &order, cut).unwrap();
+            // The sides' matrices built from the order's places: those built from the
+            // sides' cells, entry for entry.
+            for (a, b) in mats.iter().zip(an.matrices(&st, &cells)) {
+                let (sa, sb) = (a.symbolic(), b.symbolic());
+                assert!(sa.col_ptr() == sb.col_ptr() && sa.row_idx() == sb.row_idx());
+                assert!(a
+                    .val()
+                    .iter()
+                    .zip(b.val())
+                    .all(|(x, y)| x.to_bits() == y.to_bits()));
+            }
             let mut f = Factor::new(&an, mats, None).unwrap();
             // With vectors zeroed by the side done first: the same values, bit for bit,
             // and the vectors zeros however far that side got.

@@ -18,14 +18,27 @@ use super::assemble::Stencil;
 /// column of its smaller index, and each column's few entries are then sorted by row.
 pub(super) fn lower_csc(st: &Stencil, cells: &[usize]) -> (Vec<usize>, Vec<usize>, Vec<f64>) {
     let m = cells.len();
-    let (ny, nx) = (st.ny, st.nx);
-    let n = ny * nx;
+    let n = st.ny * st.nx;
     assert!(m < u32::MAX as usize && cells.iter().all(|&k| k < n));
     // Grid cell → its unknown (`u32::MAX`: none).
     let mut at = vec![u32::MAX; n];
     for (t, &k) in cells.iter().enumerate() {
         at[k] = t as u32;
     }
+    lower_csc_by(st, m, |k| at[k])
+}
+
+/// [`lower_csc`] on `m` unknowns given by `at`: grid cell → its unknown (`u32::MAX` for
+/// none; each unknown on one cell), read in grid order, so that a caller that has the map
+/// in another form (a factor in halves: the grid's unknowns and their places in the
+/// order) builds no grid-sized array for it.
+pub(super) fn lower_csc_by(
+    st: &Stencil,
+    m: usize,
+    at: impl Fn(usize) -> u32,
+) -> (Vec<usize>, Vec<usize>, Vec<f64>) {
+    let (ny, nx) = (st.ny, st.nx);
+    assert!(m < u32::MAX as usize);
     // A wrapped row of two cells joins its pair by two faces (east and west of each): the
     // first cell's east face carries both, the second's wrap is not a face of its own.
     let pair_row = st.periodic && nx == 2;
@@ -57,13 +70,15 @@ pub(super) fn lower_csc(st: &Stencil, cells: &[usize]) -> (Vec<usize>, Vec<usize
         if l == usize::MAX {
             return None;
         }
-        let q = at[l];
+        let q = at(l);
         (q != u32::MAX && q != p).then(|| (p.min(q) as usize, p.max(q) as usize))
     };
-    // Entries per column: the diagonal and the faces to unknowns of larger index.
-    let mut next = vec![1usize; m];
-    for (i, row) in at.chunks_exact(nx).enumerate() {
-        for (j, &p) in row.iter().enumerate() {
+    // Entries per column: the diagonal and the faces to unknowns of larger index (at most
+    // five; then, from the column pointers on, the entries placed so far).
+    let mut next = vec![1u32; m];
+    for i in 0..ny {
+        for j in 0..nx {
+            let p = at(i * nx + j);
             if p == u32::MAX {
                 continue;
             }
@@ -76,28 +91,29 @@ pub(super) fn lower_csc(st: &Stencil, cells: &[usize]) -> (Vec<usize>, Vec<usize
     }
     let mut col_ptr = Vec::with_capacity(m + 1);
     col_ptr.push(0);
-    let mut total = 0;
+    let mut total = 0usize;
     for c in next.iter_mut() {
-        let len = *c;
-        // From here on, where the column's next face entry goes (after its diagonal).
-        *c = total + 1;
+        let len = *c as usize;
+        col_ptr.push(total + len);
+        // The diagonal goes first.
+        *c = 1;
         total += len;
-        col_ptr.push(total);
     }
     let mut row_idx = vec![0usize; total];
     let mut vals = vec![0.0f64; total];
-    for (i, row) in at.chunks_exact(nx).enumerate() {
-        for (j, &p) in row.iter().enumerate() {
+    for i in 0..ny {
+        for j in 0..nx {
+            let k = i * nx + j;
+            let p = at(k);
             if p == u32::MAX {
                 continue;
             }
-            let k = i * nx + j;
             let d = col_ptr[p as usize];
             row_idx[d] = p as usize;
             vals[d] = if st.active[k] { st.d[k] } else { 1.0 };
             for (l, c) in faces(i, j) {
                 if let Some((lo, hi)) = ends(p, l) {
-                    let e = next[lo];
+                    let e = col_ptr[lo] + next[lo] as usize;
                     next[lo] += 1;
                     row_idx[e] = hi;
                     // `-0.0 → 0.0`: a closed face stores a plain zero.
