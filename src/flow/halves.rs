@@ -28,12 +28,11 @@
 
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::llt::factor::{cholesky_in_place, cholesky_in_place_scratch};
-use faer::linalg::matmul::triangular::{matmul, BlockStructure};
 use faer::linalg::triangular_solve::{
     solve_lower_triangular_in_place, solve_upper_triangular_in_place,
 };
 use faer::sparse::{SparseColMat, SymbolicSparseColMat};
-use faer::{Accum, Mat, Par};
+use faer::{Mat, Par};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 use super::assemble::Stencil;
@@ -111,6 +110,30 @@ impl Solved<'_> {
     }
 }
 
+/// Adds the lower triangle of a side's separator blocks (the supernodes from its column
+/// `own` on, not factored) into `s` (`k × k`, the separator's unknowns in order).
+fn add_separator_block(sa: &SideAnalysis, values: &[f64], s: &mut Mat<f64>) {
+    let sn = sa.symbolic.layout();
+    let own = sa.own;
+    for t in 0..sn.n_supernodes() {
+        let node = Supernode::of(sn, values, t);
+        let (start, ncols, pattern) = (node.start, node.ncols, node.pattern);
+        if start < own {
+            continue;
+        }
+        for c in 0..ncols {
+            let j = start + c - own;
+            let col = node.column(c);
+            for (r, &v) in col[c..ncols].iter().enumerate() {
+                s[(j + r, j)] += v;
+            }
+            for (&i, &v) in pattern.iter().zip(&col[ncols..]) {
+                s[(i - own, j)] += v;
+            }
+        }
+    }
+}
+
 /// Called by each side of the numeric factor when it is done (`done` counts them): the
 /// first has the other's remaining time to spare (the sides' flops differ by up to half),
 /// and zeroes `idle`'s vectors meanwhile.
@@ -171,10 +194,13 @@ impl Analysis {
             let pattern = SymbolicSparseColMat::new_checked(m, m, col_ptr, None, row_idx);
             let a = SparseColMat::new(pattern, vals);
             // The side's own order: its matrix is built in elimination order.
+            // A supernode boundary where the separator begins: the numeric factor stops
+            // there (`Factor::new`).
             let symbolic = Supernodes::analyse(
                 unknowns.len(),
                 a.symbolic().col_ptr(),
                 a.symbolic().row_idx(),
+                own.len(),
             )
             .map_err(failed)?;
             Ok((
@@ -246,8 +272,8 @@ fn side_matrix(st: &Stencil, cells: &[usize], unknowns: &[usize]) -> Lower {
 }
 
 /// `LEAKPATH_FLOW_PROFILE`'s lines for a side: its supernodes by width (powers of two), the
-/// factor's flops, and the times of its numeric factor and of its separator's product.
-fn profile_side(sa: &SideAnalysis, t_factor: f64, t_separator: f64) {
+/// factor's flops (its own columns') and the time of its numeric factor.
+fn profile_side(sa: &SideAnalysis, t_factor: f64) {
     let sn = sa.symbolic.layout();
     let (b, e, rp) = (
         sn.supernode_begin(),
@@ -260,12 +286,13 @@ fn profile_side(sa: &SideAnalysis, t_factor: f64, t_separator: f64) {
         let nc = e[s] - b[s];
         let nr = nc + rp[s + 1] - rp[s];
         widths[(usize::BITS - nc.leading_zeros()).min(5) as usize] += 1;
-        flops += (0..nc).map(|c| ((nr - c) * (nr - c)) as f64).sum::<f64>();
+        if b[s] < sa.own {
+            flops += (0..nc).map(|c| ((nr - c) * (nr - c)) as f64).sum::<f64>();
+        }
     }
     eprintln!(
         "halves: side of {} unknowns, {} entries, {} supernodes (by width 1, 2-3, 4-7, 8-15, \
-         16+: {:?}), {flops:.3e} flops; numeric {t_factor:.4} s, separator's product \
-         {t_separator:.4} s",
+         16+: {:?}), {flops:.3e} flops; numeric {t_factor:.4} s",
         sa.unknowns.len(),
         sn.len_val(),
         sn.n_supernodes(),
@@ -292,62 +319,25 @@ impl Factor {
             }
         }
         let done = AtomicUsize::new(0);
-        let side = |sa: &SideAnalysis, a: Lower| -> Result<(Vec<f64>, Mat<f64>)> {
-            let sn = sa.symbolic.layout();
+        let side = |sa: &SideAnalysis, a: Lower| -> Result<Vec<f64>> {
             let t0 = std::time::Instant::now();
-            let values = supernodal_values(sn, &a)?;
-            let t1 = t0.elapsed().as_secs_f64();
+            // The side's own columns factored; its separator's blocks left holding
+            // `A_SS − L_SX L_SXᵀ`, the side's part of the Schur complement.
+            let values = supernodal_values(sa.symbolic.layout(), &a, sa.own)?;
             drop(a);
-            // The separator block `L_X` (rows and columns `own..`), then `L_X L_Xᵀ`.
-            let (own, k) = (sa.own, sa.unknowns.len() - sa.own);
-            let mut lx = Mat::<f64>::zeros(k, k);
-            for t in 0..sn.n_supernodes() {
-                let node = Supernode::of(sn, &values, t);
-                let (start, ncols, pattern) = (node.start, node.ncols, node.pattern);
-                if start + ncols <= own {
-                    continue;
-                }
-                for c in 0..ncols {
-                    let j = start + c;
-                    if j < own {
-                        continue;
-                    }
-                    let col = node.column(c);
-                    for (r, &l) in col[c..ncols].iter().enumerate() {
-                        lx[(j + r - own, j - own)] = l;
-                    }
-                    for (&i, &l) in pattern.iter().zip(&col[ncols..]) {
-                        lx[(i - own, j - own)] = l;
-                    }
-                }
-            }
-            let mut t = Mat::<f64>::zeros(k, k);
-            matmul(
-                t.as_mut(),
-                BlockStructure::TriangularLower,
-                Accum::Replace,
-                lx.as_ref(),
-                BlockStructure::TriangularLower,
-                lx.transpose(),
-                BlockStructure::TriangularUpper,
-                1.0,
-                Par::Seq,
-            );
             if super::cg::profiling() {
-                profile_side(sa, t1, t0.elapsed().as_secs_f64() - t1);
+                profile_side(sa, t0.elapsed().as_secs_f64());
             }
             spare_time(&done, idle);
-            Ok((values, t))
+            Ok(values)
         };
         let (a, b) = rayon::join(|| side(&an.sides[0], ma), || side(&an.sides[1], mb));
-        let ((va, ta), (vb, tb)) = (a?, b?);
-        // `S = L_A L_Aᵀ + L_B L_Bᵀ − A_SS` (lower triangle; `s` holds `−A_SS`).
-        for j in 0..k {
-            for i in j..k {
-                s[(i, j)] += ta[(i, j)] + tb[(i, j)];
-            }
+        let (va, vb) = (a?, b?);
+        // `S = (A_SS − L_SA L_SAᵀ) + (A_SS − L_SB L_SBᵀ) − A_SS` (lower triangle; `s` holds
+        // `−A_SS`).
+        for (sa, values) in an.sides.iter().zip([&va, &vb]) {
+            add_separator_block(sa, values, &mut s);
         }
-        drop((ta, tb));
         let scratch = cholesky_in_place_scratch::<f64>(k, Par::Seq, Default::default());
         let mut buf = MemBuffer::try_new(scratch).map_err(|_| failed("out of memory"))?;
         cholesky_in_place(

@@ -30,7 +30,8 @@ pub(super) fn llt_values(
     let len = symbolic.len_val();
     if let SymbolicCholeskyRaw::Supernodal(sn) = symbolic.raw() {
         let permuted = permutation(symbolic).map(|inv| permuted_lower(a, inv));
-        return supernodal_values(Layout::of_faer(sn), permuted.as_ref().unwrap_or(a));
+        let sn = Layout::of_faer(sn);
+        return supernodal_values(sn, permuted.as_ref().unwrap_or(a), sn.nrows());
     }
     // Zeroed pages from the kernel: faer writes every value before it reads one.
     let mut values: Vec<f64> =
@@ -53,13 +54,18 @@ pub(super) fn llt_values(
 
 /// The values of the factor of `a` (lower triangle, in the factor's order) on the
 /// supernodal structure `sn` ([`super::supernodal`]).
-pub(super) fn supernodal_values(sn: Layout<'_>, a: &SparseColMat<usize, f64>) -> Result<Vec<f64>> {
+/// The supernodes from column `stop` on are not factored ([`factor_values`]).
+pub(super) fn supernodal_values(
+    sn: Layout<'_>,
+    a: &SparseColMat<usize, f64>,
+    stop: usize,
+) -> Result<Vec<f64>> {
     // The kernel's zeroed pages where the allocator maps fresh memory (no pass of zeros
     // here): the factor writes each block's zeros at its first touch, so a page is first
     // written, not read through the shared zero page and then faulted again.
     let mut values: Vec<f64> = crate::alloc::try_zeroed(sn.len_val(), "the factor")
         .map_err(|_| failed("out of memory"))?;
-    factor_values(sn, a.as_ref(), &mut values)
+    factor_values(sn, a.as_ref(), &mut values, stop)
         .map_err(|j| failed(format!("the pivot of column {j} is not positive")))?;
     Ok(values)
 }

@@ -38,16 +38,21 @@ use super::symbolic::Layout;
 /// on `sn`, written into `values` (`sn.len_val()` of them, whatever they hold on entry:
 /// each supernode's block is zeroed where it is first touched, by its first update or its
 /// own turn, so no separate pass of zeros runs over the whole factor first and the block is
-/// in cache when the factor adds into it). `Err(j)`: the pivot of column `j` is not
-/// positive and finite (`a` is not positive definite to working precision).
+/// in cache when the factor adds into it). The supernodes from column `stop` on (a
+/// supernode boundary; `sn.nrows()` for the whole factor) get their columns of `a` and the
+/// updates of those before `stop`, and are not factored: their blocks' lower triangles
+/// then hold the Schur complement of the columns before `stop`. `Err(j)`: the pivot of
+/// column `j` is not positive and finite (`a` is not positive definite to working
+/// precision).
 pub(super) fn factor_values(
     sn: Layout<'_>,
     a: SparseColMatRef<'_, usize, f64>,
     values: &mut [f64],
+    stop: usize,
 ) -> Result<(), usize> {
     super::wide::run(
         #[inline(always)]
-        || factor_values_plain(sn, a, values),
+        || factor_values_plain(sn, a, values, stop),
     )
 }
 
@@ -57,6 +62,7 @@ pub(super) fn factor_values_plain(
     sn: Layout<'_>,
     a: SparseColMatRef<'_, usize, f64>,
     values: &mut [f64],
+    stop: usize,
 ) -> Result<(), usize> {
     let n = sn.nrows();
     let ns = sn.n_supernodes();
@@ -95,6 +101,13 @@ pub(super) fn factor_values_plain(
                     col[if i < ls { i - fs } else { local[i] }] += a_vals[p];
                 }
             }
+        }
+        assert!(
+            fs >= stop || ls <= stop,
+            "column {stop} is not a supernode boundary"
+        );
+        if fs >= stop {
+            continue;
         }
         factor_block(block, nr, nc).map_err(|c| fs + c)?;
         if pattern.is_empty() {

@@ -119,12 +119,15 @@ pub(super) struct Supernodes {
 impl Supernodes {
     /// The structure of the Cholesky factor of the `n × n` symmetric matrix whose lower
     /// triangle has, in column `j`, the rows `row_idx[col_ptr[j]..col_ptr[j + 1]]` (each at
-    /// least `j`, in any order; the diagonal may be absent), eliminated in its own order.
+    /// least `j`, in any order; the diagonal may be absent), eliminated in its own order,
+    /// with no supernode holding both column `split − 1` and column `split` (`n`: no such
+    /// boundary; a factor in halves stops its numeric factor there, [`super::halves`]).
     /// `Err`: the pattern is not such a lower triangle, or the factor's size overflows.
     pub(super) fn analyse(
         n: usize,
         col_ptr: &[usize],
         row_idx: &[usize],
+        split: usize,
     ) -> Result<Self, &'static str> {
         if col_ptr.len() != n + 1
             || col_ptr[0] != 0
@@ -185,8 +188,11 @@ impl Supernodes {
         }
         let mut size: Vec<usize> = Vec::new();
         for j in 0..n {
-            let joins =
-                j > 0 && parent[j - 1] == j && children[j] == 1 && counts[j - 1] == counts[j] + 1;
+            let joins = j > 0
+                && j != split
+                && parent[j - 1] == j
+                && children[j] == 1
+                && counts[j - 1] == counts[j] + 1;
             if joins {
                 *size.last_mut().unwrap() += 1;
             } else {
@@ -211,7 +217,7 @@ impl Supernodes {
         for s in 1..nf {
             // `s − 1` is a child of `s` when the parent of its last column lies in `s`.
             let p = parent[last[s - 1]];
-            if p == NONE || of[p] as usize != s {
+            if p == NONE || of[p] as usize != s || last[s - 1] + 1 == split {
                 continue;
             }
             let (ps, cs) = (size[s], size[s - 1]);

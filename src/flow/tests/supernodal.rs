@@ -91,7 +91,7 @@ fn factored(a: &SparseColMat<usize, f64>, amd: bool) -> (SymbolicCholesky<usize>
     };
     let sn = supernodes(&symbolic);
     let mut values = vec![0.0; sn.len_val()];
-    factor_values(sn, lower.as_ref(), &mut values).unwrap();
+    factor_values(sn, lower.as_ref(), &mut values, sn.nrows()).unwrap();
     (symbolic, values)
 }
 
@@ -221,12 +221,12 @@ fn the_wide_and_plain_builds_give_the_same_bits() {
         };
         // Whatever the values held on entry (zeros, or NaN): the same factor.
         let (mut wide, mut plain) = (vec![0.0; sn.len_val()], vec![f64::NAN; sn.len_val()]);
-        factor_values(sn, a.as_ref(), &mut wide).unwrap();
-        factor_values_plain(sn, a.as_ref(), &mut plain).unwrap();
+        factor_values(sn, a.as_ref(), &mut wide, sn.nrows()).unwrap();
+        factor_values_plain(sn, a.as_ref(), &mut plain, sn.nrows()).unwrap();
         let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
         assert_eq!(bits(&wide), bits(&plain), "{ny}×{nx}: factor");
         let mut stale = vec![f64::NAN; sn.len_val()];
-        factor_values(sn, a.as_ref(), &mut stale).unwrap();
+        factor_values(sn, a.as_ref(), &mut stale, sn.nrows()).unwrap();
         assert_eq!(bits(&stale), bits(&wide), "{ny}×{nx}: factor over NaN");
         let n = ny * nx;
         let b = lcg(9, 2 * n);
@@ -322,6 +322,97 @@ fn a_right_hand_side_on_one_row_solves_against_the_operator() {
                 .map(|v| v.to_bits())
                 .collect();
             assert_eq!(together, alone, "{ny}×{nx}: column {c} interleaved");
+        }
+    }
+}
+
+/// A factor stopped at a forced supernode boundary ([`crate::flow::symbolic::Supernodes`]
+/// analysed with `split`, [`crate::flow::supernodal::factor_values`] with `stop` there):
+/// the boundary is there, and the blocks from it on hold the Schur complement
+/// `A₂₂ − A₂₁ A₁₁⁻¹ A₁₂` of the columns before it, against a dense elimination of the same
+/// matrix (faer's dense Cholesky of `A₁₁`), to 1e-12 of its largest entry. Splits at the
+/// first and the last column, near the end and in the middle; wrapped grids whose face
+/// conductances span six decades.
+#[test]
+fn a_factor_stopped_at_a_split_leaves_the_schur_complement() {
+    use crate::flow::supernodal::factor_values;
+    use crate::flow::symbolic::Supernodes;
+    use faer::linalg::cholesky::llt::factor::{cholesky_in_place, cholesky_in_place_scratch};
+    use faer::Mat;
+    for (ny, nx) in [(9, 7), (16, 12)] {
+        let a = grid_operator(ny, nx, 5 + nx as u64, None);
+        let n = ny * nx;
+        let (cp, ri, v) = (a.symbolic().col_ptr(), a.symbolic().row_idx(), a.val());
+        let dense = Mat::<f64>::from_fn(n, n, |i, j| {
+            let (lo, hi) = (i.min(j), i.max(j));
+            (cp[lo]..cp[lo + 1])
+                .find(|&p| ri[p] == hi)
+                .map_or(0.0, |p| v[p])
+        });
+        for split in [0, 1, n / 2, n - 17, n - 1, n] {
+            let sym = Supernodes::analyse(n, cp, ri, split).unwrap();
+            let sn = sym.layout();
+            assert!(
+                (0..sn.n_supernodes())
+                    .all(|s| sn.supernode_end()[s] <= split || sn.supernode_begin()[s] >= split),
+                "{ny}×{nx}: no boundary at {split}"
+            );
+            let mut values = vec![f64::NAN; sn.len_val()];
+            factor_values(sn, a.as_ref(), &mut values, split).unwrap();
+            // The Schur complement by dense elimination: `A₂₂ − X Xᵀ`, `X = A₂₁ L₁₁⁻ᵀ`.
+            let k = n - split;
+            let mut l11 = Mat::<f64>::from_fn(split, split, |i, j| dense[(i, j)]);
+            let scratch = cholesky_in_place_scratch::<f64>(split, Par::Seq, Default::default());
+            cholesky_in_place(
+                l11.as_mut(),
+                Default::default(),
+                Par::Seq,
+                MemStack::new(&mut MemBuffer::new(scratch)),
+                Default::default(),
+            )
+            .unwrap();
+            let mut x = Mat::<f64>::from_fn(split, k, |i, j| dense[(i, split + j)]);
+            faer::linalg::triangular_solve::solve_lower_triangular_in_place(
+                l11.as_ref(),
+                x.as_mut(),
+                Par::Seq,
+            );
+            let schur = Mat::<f64>::from_fn(k, k, |i, j| {
+                dense[(split + i, split + j)]
+                    - (0..split).map(|q| x[(q, i)] * x[(q, j)]).sum::<f64>()
+            });
+            // The lower triangle of the blocks from the split on.
+            let mut got = Mat::<f64>::zeros(k, k);
+            for t in 0..sn.n_supernodes() {
+                let node = Supernode::of(sn, &values, t);
+                if node.start < split {
+                    continue;
+                }
+                for c in 0..node.ncols {
+                    let j = node.start + c - split;
+                    let col = node.column(c);
+                    for (r, &w) in col[c..node.ncols].iter().enumerate() {
+                        got[(j + r, j)] = w;
+                    }
+                    for (&i, &w) in node.pattern.iter().zip(&col[node.ncols..]) {
+                        got[(i - split, j)] = w;
+                    }
+                }
+            }
+            let scale = (0..k)
+                .flat_map(|j| (j..k).map(move |i| (i, j)))
+                .map(|(i, j)| schur[(i, j)].abs())
+                .fold(0.0, f64::max);
+            for j in 0..k {
+                for i in j..k {
+                    assert!(
+                        (got[(i, j)] - schur[(i, j)]).abs() <= 1e-12 * scale,
+                        "{ny}×{nx}, split {split}: ({i}, {j}) {} against {}",
+                        got[(i, j)],
+                        schur[(i, j)]
+                    );
+                }
+            }
         }
     }
 }

@@ -15,7 +15,7 @@ fn assert_same_structure(a: &SparseColMat<usize, f64>, what: &str) {
     };
     let theirs = Layout::of_faer(sn);
     let (ptr, rows) = (a.symbolic().col_ptr(), a.symbolic().row_idx());
-    let ours = Supernodes::analyse(a.nrows(), ptr, rows).unwrap();
+    let ours = Supernodes::analyse(a.nrows(), ptr, rows, a.nrows()).unwrap();
     let ours = ours.layout();
     assert_eq!(ours.nrows(), theirs.nrows(), "{what}: columns");
     assert_eq!(
@@ -131,11 +131,11 @@ fn the_analysis_matches_faers_on_random_patterns() {
 /// A pattern that is not a lower triangle is refused, not analysed.
 #[test]
 fn the_analysis_refuses_a_pattern_that_is_not_a_lower_triangle() {
-    let err = Supernodes::analyse(3, &[0, 2, 3, 4], &[0, 1, 0, 2]).err();
+    let err = Supernodes::analyse(3, &[0, 2, 3, 4], &[0, 1, 0, 2], 3).err();
     assert!(err.unwrap().contains("lower triangle"));
-    let err = Supernodes::analyse(3, &[0, 2, 3], &[0, 1, 1]).err();
+    let err = Supernodes::analyse(3, &[0, 2, 3], &[0, 1, 1], 3).err();
     assert!(err.unwrap().contains("column pointers"));
-    let empty = Supernodes::analyse(0, &[0], &[]).unwrap();
+    let empty = Supernodes::analyse(0, &[0], &[], 0).unwrap();
     assert_eq!(empty.layout().n_supernodes(), 0);
     assert_eq!(empty.layout().len_val(), 0);
 }
