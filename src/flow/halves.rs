@@ -13,13 +13,13 @@
 //! and the columns of a side depend only on the rows of that side and of `S`. The factors
 //! of the principal submatrix `M_A = A[A ∪ S, A ∪ S]` (positive definite, as a principal
 //! submatrix of a positive definite matrix), whose columns on `A` are `[L_AA; L_SA]`
-//! exactly, and of `M_B` are computed on the two threads ([`super::llt`]). The separator
-//! block `L_A` of `M_A`'s factor has `L_A L_Aᵀ = A_SS − L_SA L_SAᵀ`, so the separator's Schur complement is
-//! `A_SS − L_SA L_SAᵀ − L_SB L_SBᵀ = L_A L_Aᵀ + L_B L_Bᵀ − A_SS`, factored densely:
-//! `L_SS`. The factorisations of the separator blocks inside `M_A` and `M_B` and the two
-//! products are the price (`k³/3` flops each, `k` ≈ the grid's side): small against the
-//! half of the factor that runs on the second core (docs/flow.md, "The factor in two
-//! halves").
+//! exactly, and of `M_B` are computed on the two threads ([`super::llt`]), each stopped
+//! at its separator columns (a supernode boundary the analysis keeps there): the
+//! separator's blocks of `M_A` are left holding `A_SS − L_SA L_SAᵀ`, so the separator's
+//! Schur complement is `A_SS − L_SA L_SAᵀ − L_SB L_SBᵀ` = (that of `M_A`) + (that of
+//! `M_B`) − `A_SS`, factored densely: `L_SS` (`k³/3` flops, `k` ≈ the grid's side, on one
+//! core: small against the half of the factor that runs on the second; docs/flow.md,
+//! "The factor in two halves").
 //!
 //! A solve runs forward on each side's factor up to its separator columns (the sides at
 //! once), the separator's right-hand side gathered from both, the dense `L_SS` both ways,
