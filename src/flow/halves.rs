@@ -193,9 +193,9 @@ impl Analysis {
             let m = unknowns.len();
             let pattern = SymbolicSparseColMat::new_checked(m, m, col_ptr, None, row_idx);
             let a = SparseColMat::new(pattern, vals);
-            // The side's own order: its matrix is built in elimination order.
-            // A supernode boundary where the separator begins: the numeric factor stops
-            // there (`Factor::new`).
+            // In the side's own order (its matrix is built in elimination order), with a
+            // supernode boundary where the separator begins: the numeric factor stops there
+            // (`Factor::new`).
             let symbolic = Supernodes::analyse(
                 unknowns.len(),
                 a.symbolic().col_ptr(),
