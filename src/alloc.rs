@@ -73,14 +73,19 @@ pub fn try_zeroed<T: Zeroed>(n: usize, what: &str) -> Result<Vec<T>> {
 /// inside a solver's parallel loops each fault stalls one thread while the other waits at
 /// the loop's end (docs/flow.md, "Fresh pages", has the flow's figures at 4097²).
 pub fn zeroed_now(n: usize) -> Vec<f64> {
-    use rayon::prelude::*;
     let mut v: Vec<f64> = Vec::with_capacity(n);
-    v.spare_capacity_mut()
-        .par_chunks_mut(1 << 16)
-        .for_each(|c| c.iter_mut().for_each(|e| _ = e.write(0.0)));
+    write_zeros(&mut v.spare_capacity_mut()[..n]);
     // SAFETY: every one of the `n` values of the capacity was written just above.
     unsafe { v.set_len(n) };
     v
+}
+
+/// Zeros written into `values` by every thread, in fixed chunks.
+fn write_zeros(values: &mut [std::mem::MaybeUninit<f64>]) {
+    use rayon::prelude::*;
+    values
+        .par_chunks_mut(1 << 16)
+        .for_each(|c| c.iter_mut().for_each(|e| _ = e.write(0.0)));
 }
 
 /// Zeroed `f64` vectors made ahead of their use by a thread of their own, started where the
@@ -214,7 +219,6 @@ impl ZeroedByIdle {
     /// A zeroed vector of the length given at [`ZeroedByIdle::new`]: the next one made
     /// ahead, its remaining values zeroed here by every thread, else [`zeroed_now`].
     pub fn take(&mut self) -> Vec<f64> {
-        use rayon::prelude::*;
         if self.slots.is_empty() {
             return zeroed_now(self.len);
         }
@@ -223,9 +227,7 @@ impl ZeroedByIdle {
         if v.capacity() < self.len {
             return zeroed_now(self.len);
         }
-        v.spare_capacity_mut()[done..self.len]
-            .par_chunks_mut(1 << 16)
-            .for_each(|c| c.iter_mut().for_each(|e| _ = e.write(0.0)));
+        write_zeros(&mut v.spare_capacity_mut()[done..self.len]);
         // SAFETY: the first `done` values were written by `work_while` (under the slot's
         // lock, which `into_inner` has released to us) and the rest just above.
         unsafe { v.set_len(self.len) };

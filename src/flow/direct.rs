@@ -190,6 +190,9 @@ enum Matrices {
     Halves([SparseColMat<usize, f64>; 2]),
 }
 
+/// Cells a thread numbers at a time in [`unknowns_of`].
+const UNKNOWNS_BLOCK: usize = 1 << 15;
+
 /// The unknowns of the active cells, numbered in grid order: each cell's unknown
 /// (`usize::MAX` for none) and each unknown's cell. Both written by every thread, a block
 /// of cells each, at the offset that the counts of the blocks before it give (2.1 MB of
@@ -197,9 +200,8 @@ enum Matrices {
 /// the call).
 fn unknowns_of(active: &[bool]) -> (Vec<usize>, Vec<usize>) {
     use rayon::prelude::*;
-    const BLOCK: usize = 1 << 15;
     let counts: Vec<usize> = active
-        .par_chunks(BLOCK)
+        .par_chunks(UNKNOWNS_BLOCK)
         .map(|b| b.iter().filter(|&&on| on).count())
         .collect();
     let mut cells = vec![0usize; counts.iter().sum()];
@@ -213,8 +215,8 @@ fn unknowns_of(active: &[bool]) -> (Vec<usize>, Vec<usize>) {
     let mut index = Vec::with_capacity(active.len());
     index
         .spare_capacity_mut()
-        .par_chunks_mut(BLOCK)
-        .zip(active.par_chunks(BLOCK))
+        .par_chunks_mut(UNKNOWNS_BLOCK)
+        .zip(active.par_chunks(UNKNOWNS_BLOCK))
         .zip(parts)
         .enumerate()
         .for_each(|(b, ((slots, on), (start, part)))| {
@@ -222,7 +224,7 @@ fn unknowns_of(active: &[bool]) -> (Vec<usize>, Vec<usize>) {
             for (j, (slot, &on)) in slots.iter_mut().zip(on).enumerate() {
                 if on {
                     slot.write(start + t);
-                    part[t] = b * BLOCK + j;
+                    part[t] = b * UNKNOWNS_BLOCK + j;
                     t += 1;
                 } else {
                     slot.write(usize::MAX);
@@ -633,8 +635,12 @@ mod tests {
     /// order, on patterns of no, one, some and every active cell, across block boundaries.
     #[test]
     fn unknowns_are_numbered_in_grid_order() {
-        const BLOCK: usize = 1 << 15;
-        for (n, density) in [(0, 0.5), (1, 1.0), (BLOCK, 0.3), (3 * BLOCK + 17, 0.6)] {
+        for (n, density) in [
+            (0, 0.5),
+            (1, 1.0),
+            (UNKNOWNS_BLOCK, 0.3),
+            (3 * UNKNOWNS_BLOCK + 17, 0.6),
+        ] {
             for d in [0.0, density, 1.0] {
                 let active: Vec<bool> = crate::flow::tests::lcg(31, n)
                     .iter()
