@@ -252,11 +252,62 @@ pub fn try_filled_huge<T: Clone>(n: usize, value: T, what: &str) -> Result<Vec<T
     Ok(v)
 }
 
+/// [`try_zeroed`] for a buffer written once, block by block, soon after it is allocated (a
+/// sparse factor's values): when it spans 2 to [`HUGE_ADVICE_MAX`] huge pages and the kernel
+/// has twice as many free ([`huge_pages_free`]), its fresh pages are asked to be huge pages,
+/// so that a first touch faults one 2 MiB page instead of 512 small ones (docs/flow.md,
+/// "Fresh pages"). Without that much free, no advice: a fault would otherwise stall while
+/// the kernel compacts memory.
+pub fn try_zeroed_huge<T: Zeroed>(n: usize, what: &str) -> Result<Vec<T>> {
+    let mut v: Vec<T> = try_zeroed(n, what)?;
+    let bytes = n * std::mem::size_of::<T>();
+    let pages = bytes / HUGE_PAGE;
+    if (2..=HUGE_ADVICE_MAX).contains(&pages)
+        && huge_pages_free().is_some_and(|free| free >= 2 * pages as u64)
+    {
+        advise_huge_pages(v.as_mut_ptr().cast(), bytes);
+    }
+    Ok(v)
+}
+
+/// Most huge pages [`try_zeroed_huge`] asks for in one buffer. On a virtual machine whose
+/// host backs the guest's memory when it is first written, an occasional fresh huge page
+/// costs tens of milliseconds: a first flow at 513² (8 huge pages a side) was faster with
+/// them in most runs, one at 1025² (45 a side) slower in most (docs/flow.md, "Fresh
+/// pages").
+const HUGE_ADVICE_MAX: usize = 32;
+
+/// Bytes of a (transparent) huge page on x86-64 and most 64-bit Linux systems.
+const HUGE_PAGE: usize = 2 << 20;
+
+/// Free 2 MiB blocks of the system's memory, from `/proc/buddyinfo` (`None` where it cannot
+/// be read).
+fn huge_pages_free() -> Option<u64> {
+    std::fs::read_to_string("/proc/buddyinfo")
+        .ok()
+        .map(|text| huge_pages_in(&text))
+}
+
+/// Free 2 MiB blocks in a `/proc/buddyinfo` text: per zone, the free blocks of order 0, 1,
+/// … (4 KiB · 2^order); those of order 9 are 2 MiB, those of order `k > 9` hold `2^(k − 9)`.
+fn huge_pages_in(text: &str) -> u64 {
+    text.lines()
+        .filter_map(|line| line.split_once("zone"))
+        .flat_map(|(_, rest)| {
+            rest.split_whitespace()
+                .skip(1)
+                .enumerate()
+                .filter(|&(order, _)| order >= 9)
+                .map(|(order, count)| count.parse::<u64>().unwrap_or(0) << (order - 9).min(32))
+        })
+        .sum()
+}
+
 /// Asks the kernel to back the 2 MiB-aligned part of `bytes` bytes at `ptr` by huge pages,
 /// before they are first touched. Advice only: whatever the answer, nothing else changes.
 #[cfg(target_os = "linux")]
 fn advise_huge_pages(ptr: *mut u8, bytes: usize) {
-    const HUGE: usize = 2 << 20;
+    const HUGE: usize = HUGE_PAGE;
     // `MADV_HUGEPAGE` (asm-generic/mman-common.h).
     const MADV_HUGEPAGE: i32 = 14;
     extern "C" {
@@ -304,6 +355,28 @@ pub fn refused(bytes: u64, what: &str) -> Error {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Free huge pages counted from a `/proc/buddyinfo` text by hand: orders 9 and 10 of
+    /// each zone (an order-10 block is two huge pages), lower orders not at all.
+    #[test]
+    fn free_huge_pages_are_counted_from_the_buddy_lists() {
+        let text = "Node 0, zone      DMA      0      0      0      0      0      0      0      0      1      1      3 \n\
+                    Node 0, zone    DMA32      1      1      4      2      5      4      3      3      4      2    752 \n\
+                    Node 0, zone   Normal   9753   6838   4630   2996   2781   1784    885    307    145     85    370 \n";
+        assert_eq!(
+            huge_pages_in(text),
+            (1 + 2 * 3) + (2 + 2 * 752) + (85 + 2 * 370)
+        );
+        assert_eq!(huge_pages_in(""), 0);
+        assert_eq!(huge_pages_in("Node 0, zone Normal 5 4 3\n"), 0);
+        // A buffer advised (or not: a machine without free huge pages, or one too large)
+        // is still zeros.
+        for n in [3 << 19, (HUGE_ADVICE_MAX + 3) << 18] {
+            let v: Vec<f64> = try_zeroed_huge(n, "a test buffer").unwrap();
+            assert_eq!(v.len(), n);
+            assert!(v.iter().all(|&x| x == 0.0));
+        }
+    }
 
     #[test]
     fn zeroed_buffers_are_zero() {

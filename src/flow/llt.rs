@@ -63,7 +63,7 @@ pub(super) fn supernodal_values(
     // The kernel's zeroed pages where the allocator maps fresh memory (no pass of zeros
     // here): the factor writes each block's zeros at its first touch, so a page is first
     // written, not read through the shared zero page and then faulted again.
-    let mut values: Vec<f64> = crate::alloc::try_zeroed(sn.len_val(), "the factor")
+    let mut values: Vec<f64> = crate::alloc::try_zeroed_huge(sn.len_val(), "the factor")
         .map_err(|_| failed("out of memory"))?;
     factor_values(sn, a.as_ref(), &mut values, stop)
         .map_err(|j| failed(format!("the pivot of column {j} is not positive")))?;
