@@ -256,8 +256,8 @@ pub fn try_filled_huge<T: Clone>(n: usize, value: T, what: &str) -> Result<Vec<T
 /// sparse factor's values): when it spans 2 to [`HUGE_ADVICE_MAX`] huge pages and the kernel
 /// has twice as many free ([`huge_pages_free`]), its fresh pages are asked to be huge pages,
 /// so that a first touch faults one 2 MiB page instead of 512 small ones (docs/flow.md,
-/// "Fresh pages"). Without that much free, no advice: a fault would otherwise stall while
-/// the kernel compacts memory.
+/// "The factor's values on huge pages"). Without that much free, no advice: a fault would
+/// otherwise stall while the kernel compacts memory.
 pub fn try_zeroed_huge<T: Zeroed>(n: usize, what: &str) -> Result<Vec<T>> {
     let mut v: Vec<T> = try_zeroed(n, what)?;
     let bytes = n * std::mem::size_of::<T>();
@@ -273,8 +273,8 @@ pub fn try_zeroed_huge<T: Zeroed>(n: usize, what: &str) -> Result<Vec<T>> {
 /// Most huge pages [`try_zeroed_huge`] asks for in one buffer. On a virtual machine whose
 /// host backs the guest's memory when it is first written, an occasional fresh huge page
 /// costs tens of milliseconds: a first flow at 513² (8 huge pages a side) was faster with
-/// them in most runs, one at 1025² (45 a side) slower in most (docs/flow.md, "Fresh
-/// pages").
+/// them in most runs, one at 1025² (45 a side) slower in most (docs/flow.md, "The
+/// factor's values on huge pages").
 const HUGE_ADVICE_MAX: usize = 32;
 
 /// Bytes of a (transparent) huge page on x86-64 and most 64-bit Linux systems.

@@ -1,4 +1,5 @@
-"""The multigrid flow solver on contact gaps at the percolation threshold.
+"""The multigrid flow solver on contact gaps at the percolation threshold (257², 513²,
+1025²).
 
 Oracles: scipy's sparse LU of the same finite-volume system (``tests/test_flow_solver.py``
 assembles it independently of leakpath) and leakpath's sparse Cholesky factor.
@@ -39,6 +40,35 @@ def test_multigrid_matches_the_factor_and_scipy_at_the_threshold(threshold_gap):
     assert abs(mg.inlet_flow_rate / mg.flow_rate - 1) <= 1e-9
     assert mg.conservation <= 1e-6
     # The pressures agree where they are defined.
+    ok = np.isfinite(ch.pressure)
+    assert np.array_equal(ok, np.isfinite(mg.pressure))
+    assert np.max(np.abs(mg.pressure[ok] - ch.pressure[ok])) <= 1e-6
+
+
+@pytest.fixture(scope="module", params=[513, 1025])
+def large_threshold_gap(request):
+    """The last spanning state of the percolation-threshold bisection on a periodic
+    spectral surface of 513² and 1025² cells: one tortuous channel at the resolutions the
+    factored and multigrid paths are chosen between."""
+    n = request.param
+    s = leakpath.spectral(n, 0.8, seed=7, rms_height=1.0)
+    th = leakpath.percolation_threshold(s, boundary="periodic", atol=1e-3 * s.height_range)
+    st = th.below
+    return np.maximum(st.gap, 0.0), np.asarray(st.contact), st.contact_fraction
+
+
+def test_multigrid_matches_the_factor_at_the_threshold_on_large_grids(large_threshold_gap):
+    gap, contact, a = large_threshold_gap
+    n = gap.shape[0]
+    assert 0.3 < a < 0.55
+    kw = dict(dx=1.0 / n, contact=contact, periodic=True)
+    mg = leakpath.flow(gap, solver="multigrid", **kw)
+    ch = leakpath.flow(gap, solver="cholesky", **kw)
+    assert mg.solver == "multigrid" and ch.solver == "cholesky"
+    assert mg.n_unknowns == ch.n_unknowns > 0
+    assert 0 < mg.iterations < 200
+    assert mg.flow_rate == pytest.approx(ch.flow_rate, rel=1e-8, abs=0)
+    assert abs(mg.inlet_flow_rate / mg.flow_rate - 1) <= 1e-9
     ok = np.isfinite(ch.pressure)
     assert np.array_equal(ok, np.isfinite(mg.pressure))
     assert np.max(np.abs(mg.pressure[ok] - ch.pressure[ok])) <= 1e-6
