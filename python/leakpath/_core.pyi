@@ -406,7 +406,8 @@ def solve_reynolds_flow(
     (conjugate gradients with a classical (Ruge–Stüben) algebraic multigrid preconditioner to
     ``‖b − Ax‖/‖b‖ ≤ tol`` and ``|Q_in − Q_out| ≤ tol·|Q_out|`` unless round-off stalls it
     first) or "auto" (Cholesky whenever its factor fits in
-    ``memory_limit`` and the available memory, multigrid otherwise). Returns a
+    ``memory_limit`` and the available memory and is not predicted slower than the
+    multigrid, multigrid otherwise; the multigrid from 2^22 unknowns; docs/flow.md). Returns a
     :class:`FlowSolution`: ``pressure`` (ny, nx; NaN on closed cells and on clusters joined to no
     reservoir), ``flux_axis0`` (ny + 1, nx),
     ``flux_axis1`` (ny, nx + 1) (volume per time through each face, positive towards

@@ -315,13 +315,14 @@ def flow(
             preconditioned by classical algebraic multigrid, refined on exact residuals
             until the residual, the rate's error and the Jacobi pressure change are below
             ``tol``; memory linear in the grid), or ``"auto"`` (default: the multigrid from
-            2^22 unknowns (4097²-class gaps, where it is the faster), and there Cholesky
-            when the multigrid refuses the gap and the factor fits; below, Cholesky whenever
-            its factor, whose exact size is known after the symbolic analysis, fits in
-            ``memory_limit`` and the available memory, skipping the analysis when even a
-            lower bound of the factor (320 bytes per unknown) does not fit; multigrid
-            otherwise, and when the factor's answer fails its checks on more than 2^20
-            unknowns; docs/flow.md).
+            2^22 unknowns (4097²-class gaps, where it is the faster); below, Cholesky
+            whenever its factor, whose exact size and work are known after the symbolic
+            analysis, fits in ``memory_limit`` and the available memory and is not predicted
+            slower than the multigrid (more than 19 000 multiply-adds per unknown: large
+            open regions), skipping the analysis when even a lower bound of the factor
+            (320 bytes per unknown) does not fit; multigrid otherwise, and when the factor's
+            answer fails its checks on more than 2^20 unknowns; where the multigrid ran
+            first and refuses the gap, Cholesky when it fits; docs/flow.md).
         gas: isothermal ideal gas instead of an incompressible liquid (module docstring);
             needs ``inlet_pressure`` and ``outlet_pressure`` (absolute, ``≥ 0``),
             ``gas_constant`` ``R_s`` (specific, e.g. 287.05 J/(kg K) for air) and

@@ -196,15 +196,26 @@ pub(super) fn solve_axis0(
     // refinement; empty otherwise).
     let mut lo = (Vec::new(), Vec::new());
     let direct_answer = if n_unknowns == 0 || opts.solver == Solver::Multigrid || hopeless {
-        None
+        Direct::Unavailable
     } else {
-        factored(&fine, &rhs, &b_out, n_unknowns, opts, factor_room, &mut lo)?
+        factored(
+            &fine,
+            [&rhs, &b_out],
+            n_unknowns,
+            opts,
+            factor_room,
+            true,
+            &mut lo,
+        )?
     };
+    // `Auto` took the multigrid as the faster, the factor fitting: it is there if the
+    // multigrid refuses the gap.
+    let declined = matches!(direct_answer, Direct::Slower);
     // `index`: each cell's unknown when `x` and `psi` are by unknown (the multigrid's), else
     // empty (by cell).
     let (st, x, psi, index, residual, solver) = if n_unknowns == 0 {
         (fine, vec![0.0; n], vec![0.0; n], Vec::new(), 0.0, "none")
-    } else if let Some((x, psi, residual)) = direct_answer {
+    } else if let Direct::Answer((x, psi, residual)) = direct_answer {
         (fine, x, psi, Vec::new(), residual, "cholesky")
     } else {
         let need = multigrid_estimate(n, n_unknowns);
@@ -230,11 +241,12 @@ pub(super) fn solve_axis0(
             mg.gather_row(&in_row, 0),
             mg.row_entries(&out_row, (ny - 1) * nx),
         );
-        // `Auto` ran the multigrid first by size alone: when it refuses the gap, the factor
-        // if its lower bound fits.
+        // `Auto` ran the multigrid first by size alone or as the predicted faster: when it
+        // refuses the gap, the factor if its lower bound fits.
         let fallback = opts.solver == Solver::Auto
-            && n_unknowns >= opts.multigrid_from
-            && !auto_skips_factor(n_unknowns, usize::MAX, factor_room);
+            && (declined
+                || n_unknowns >= opts.multigrid_from
+                    && !auto_skips_factor(n_unknowns, usize::MAX, factor_room));
         match solve_multigrid(&mg, b_in, b_o, opts, max_iter, ahead)? {
             Ok((x, psi, residual, it)) => {
                 iterations = it;
@@ -248,13 +260,22 @@ pub(super) fn solve_axis0(
                 rhs[..nx].copy_from_slice(&in_row);
                 let mut b_out = vec![0.0; n];
                 b_out[(ny - 1) * nx..].copy_from_slice(&out_row);
-                match factored(&fine, &rhs, &b_out, n_unknowns, opts, factor_room, &mut lo) {
-                    Ok(Some((x, psi, residual))) => {
+                match factored(
+                    &fine,
+                    [&rhs, &b_out],
+                    n_unknowns,
+                    opts,
+                    factor_room,
+                    false,
+                    &mut lo,
+                ) {
+                    Ok(Direct::Answer((x, psi, residual))) => {
                         (fine, x, psi, Vec::new(), residual, "cholesky")
                     }
                     // The factor did not fit or its answer failed its checks: the
                     // multigrid's refusal says why the gap is out of reach.
-                    Ok(None) | Err(Error::TooLarge { .. } | Error::NotConverged { .. }) => {
+                    Ok(Direct::Slower | Direct::Unavailable)
+                    | Err(Error::TooLarge { .. } | Error::NotConverged { .. }) => {
                         return Err(refusal)
                     }
                     Err(e) => return Err(e),
@@ -420,20 +441,32 @@ pub(super) fn solve_axis0(
 /// `φ`, `ψ` (by cell) and the relative residual of a factored answer.
 type Factored = (Vec<f64>, Vec<f64>, f64);
 
+/// What [`factored`] gives `Auto`.
+enum Direct {
+    /// The factored answer.
+    Answer(Factored),
+    /// The multigrid is predicted the faster ([`cost::prefers_multigrid`]): no factor.
+    Slower,
+    /// No answer: the factor does not fit, or its answer failed its checks on more unknowns
+    /// than the elimination takes.
+    Unavailable,
+}
+
 /// The factored answer `(φ, ψ, residual)` on the cells of `fine` (by cell), its low parts in
 /// `lo` when it was refined in two doubles or eliminated without cancellation: the factor's
-/// answer when it passes its checks, else the cancellation-free elimination. `None` when
-/// `Auto` has no answer here: the factor does not fit, or its answer fails on more unknowns
-/// than the elimination takes (the caller then runs, or reports, the multigrid).
+/// answer when it passes its checks, else the cancellation-free elimination. For `Auto`,
+/// [`Direct::Unavailable`] when the factor does not fit or its answer fails on more
+/// unknowns than the elimination takes (the caller then runs, or reports, the multigrid),
+/// and with `weigh` [`Direct::Slower`] when the analysis predicts the multigrid faster.
 fn factored(
     fine: &assemble::Stencil,
-    rhs: &[f64],
-    b_out: &[f64],
+    [rhs, b_out]: [&[f64]; 2],
     n_unknowns: usize,
     opts: &Options<'_>,
     factor_room: Option<u64>,
+    weigh: bool,
     lo: &mut (Vec<f64>, Vec<f64>),
-) -> Result<Option<Factored>> {
+) -> Result<Direct> {
     let n = fine.ny * fine.nx;
     let prof = cg::profiling();
     let kept = opts.analysis.filter(|k| k.applies(n));
@@ -443,22 +476,43 @@ fn factored(
     let mut spare = ZeroedByIdle::new(6, n);
     // A kept analysis carries the fill of an earlier level's larger set of unknowns: when
     // that does not fit, this level's own (smaller) analysis may.
-    let made = match direct::Factor::new_reusing(fine, factor_room, prior.as_ref(), Some(&spare)) {
-        Err(Error::TooLarge { .. }) if prior.is_some() => {
-            direct::Factor::new_reusing(fine, factor_room, None, Some(&spare))
+    let slower = |an: &direct::Analysis| {
+        let (flops, entries) = (an.critical_flops(), an.entries());
+        let rate = opts.multigrid_seconds_per_unknown;
+        let slower = cost::prefers_multigrid(flops, n_unknowns, rate);
+        if prof {
+            eprintln!(
+                "flow: auto predicts the factor {:.3} s ({:.3e} critical flops, {entries} \
+                 entries), the multigrid {:.3} s ({n_unknowns} unknowns): {}",
+                cost::factor_seconds(flops),
+                flops,
+                cost::multigrid_seconds(n_unknowns, rate),
+                if slower { "multigrid" } else { "factor" }
+            );
         }
+        slower
+    };
+    let declines = (weigh && opts.solver == Solver::Auto)
+        .then_some(&slower as &dyn Fn(&direct::Analysis) -> bool);
+    let make =
+        |prior| direct::Factor::new_reusing(fine, factor_room, prior, Some(&spare), declines);
+    let made = match make(prior.as_ref()) {
+        Err(Error::TooLarge { .. }) if prior.is_some() => make(None),
         made => made,
     };
     // `Ok`: a factor; `Err`: the factor broke down (a non-positive pivot of the rounded
     // matrix).
     let factor = match made {
-        Ok(f) => {
+        Ok(Some(f)) => {
             if let Some(k) = kept {
                 k.keep(f.analysis(), f.reused());
             }
             Ok(f)
         }
-        Err(Error::TooLarge { .. }) if opts.solver == Solver::Auto => return Ok(None),
+        Ok(None) => return Ok(Direct::Slower),
+        Err(Error::TooLarge { .. }) if opts.solver == Solver::Auto => {
+            return Ok(Direct::Unavailable)
+        }
         Err(e @ Error::NotConverged { .. }) => Err(e),
         Err(e) => return Err(e),
     };
@@ -502,13 +556,15 @@ fn factored(
         Some(a) => {
             let residual = a.residual();
             *lo = a.lo;
-            Some((a.x, a.psi, residual))
+            Direct::Answer((a.x, a.psi, residual))
         }
-        None if opts.solver == Solver::Auto && n_unknowns > gth::MAX_UNKNOWNS => None,
+        None if opts.solver == Solver::Auto && n_unknowns > gth::MAX_UNKNOWNS => {
+            Direct::Unavailable
+        }
         None => {
             let (x, psi, residual, split) = solve_gth(fine, rhs, b_out, factor_room)?;
             *lo = split;
-            Some((x, psi, residual))
+            Direct::Answer((x, psi, residual))
         }
     })
 }

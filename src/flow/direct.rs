@@ -95,6 +95,16 @@ impl Analysis {
         }
     }
 
+    /// Multiply-adds on the numeric factor's critical path: the heavier half's and the
+    /// separator's for a factor in halves, every column's for a whole one (which runs on
+    /// one thread).
+    pub fn critical_flops(&self) -> f64 {
+        match &self.structure {
+            Structure::Whole(symbolic) => whole_flops(symbolic),
+            Structure::Halves(h) => h.critical_flops(),
+        }
+    }
+
     /// Whether an operator `st` with `active` unknowns can be factored on this analysis:
     /// (on the same grid and wrap) at least [`REUSE_FRACTION`] of its unknowns, all its
     /// active cells among them (`index`: grid cell → unknown of the analysis).
@@ -264,22 +274,12 @@ fn profile(
     let t_numeric = cg::secs(t0);
     let supernodal = |symbolic: &SymbolicCholesky<usize>| {
         if let SymbolicCholeskyRaw::Supernodal(sn) = symbolic.raw() {
-            let (b, e, rp) = (
-                sn.supernode_begin(),
-                sn.supernode_end(),
-                sn.col_ptr_for_row_idx(),
-            );
-            let mut flops = 0f64;
-            let mut big = 0usize;
-            for s in 0..sn.n_supernodes() {
-                let nc = e[s] - b[s];
-                big = big.max(nc);
-                let nr = nc + rp[s + 1] - rp[s];
-                for c in 0..nc {
-                    let k = (nr - c) as f64;
-                    flops += k * k;
-                }
-            }
+            let flops = whole_flops(symbolic);
+            let (b, e) = (sn.supernode_begin(), sn.supernode_end());
+            let big = (0..sn.n_supernodes())
+                .map(|s| e[s] - b[s])
+                .max()
+                .unwrap_or(0);
             eprintln!(
                 "factor: {} supernodes, largest {big} columns, {flops:.3e} flops",
                 sn.n_supernodes()
@@ -311,6 +311,33 @@ fn profile(
     );
 }
 
+/// Multiply-adds of a whole factor, `Σ (entries of the column, its diagonal's included)²`
+/// over its columns.
+fn whole_flops(symbolic: &SymbolicCholesky<usize>) -> f64 {
+    let sn = match symbolic.raw() {
+        SymbolicCholeskyRaw::Supernodal(sn) => sn,
+        SymbolicCholeskyRaw::Simplicial(s) => {
+            return s
+                .col_ptr()
+                .windows(2)
+                .map(|w| ((w[1] - w[0]) as f64).powi(2))
+                .sum();
+        }
+    };
+    let (b, e, rp) = (
+        sn.supernode_begin(),
+        sn.supernode_end(),
+        sn.col_ptr_for_row_idx(),
+    );
+    (0..sn.n_supernodes())
+        .map(|s| {
+            let nc = e[s] - b[s];
+            let nr = nc + rp[s + 1] - rp[s];
+            (0..nc).map(|c| ((nr - c) * (nr - c)) as f64).sum::<f64>()
+        })
+        .sum()
+}
+
 /// Bytes of the values of a factor with `entries` entries, its numeric scratch `scratch`
 /// and the symbolic structure (an index per entry at most).
 fn factor_bytes(entries: usize, scratch: usize) -> u64 {
@@ -321,20 +348,24 @@ impl Factor {
     /// Orders, analyses and factors `st` on its active cells. With `memory_limit`, refuses
     /// with [`Error::TooLarge`] after the symbolic analysis when the factor would need more.
     pub fn new(st: &Stencil, memory_limit: Option<u64>) -> Result<Self> {
-        Self::new_reusing(st, memory_limit, None, None)
+        let made = Self::new_reusing(st, memory_limit, None, None, None)?;
+        made.ok_or_else(|| failed("a factor declined without a test"))
     }
 
     /// [`Factor::new`] on `kept` when it fits `st` ([`REUSE_FRACTION`], the active cells
     /// among its unknowns): no ordering nor symbolic analysis, the factor's values only.
     /// [`Factor::analysis`] gives the analysis used, to keep for the next operator.
     /// With `idle`, a thread whose share of the factor in halves is done before the other's
-    /// zeroes its vectors meanwhile ([`ZeroedByIdle::work_while`]).
+    /// zeroes its vectors meanwhile ([`ZeroedByIdle::work_while`]). With `declines`, `None`
+    /// when it holds for the analysis: the numeric factor, the costly part, is not computed
+    /// (`Auto` predicting the multigrid faster, [`super::cost`]).
     pub fn new_reusing(
         st: &Stencil,
         memory_limit: Option<u64>,
         kept: Option<&Arc<Analysis>>,
         idle: Option<&ZeroedByIdle>,
-    ) -> Result<Self> {
+        declines: Option<&dyn Fn(&Analysis) -> bool>,
+    ) -> Result<Option<Self>> {
         let n = st.ny * st.nx;
         let t0 = std::time::Instant::now();
         let active = st.active.iter().filter(|&&on| on).count();
@@ -445,6 +476,9 @@ impl Factor {
                 });
             }
         }
+        if declines.is_some_and(|d| d(&analysis)) {
+            return Ok(None);
+        }
         if m > 16 {
             // The supernodes' dense products: a refusal, not an abort, when their CPU-sized
             // scratch does not fit.
@@ -469,7 +503,7 @@ impl Factor {
                 t0,
             );
         }
-        Ok(Factor {
+        Ok(Some(Factor {
             // A factor in halves keeps its own (by side).
             work: match numeric {
                 Numeric::Whole { .. } => vec![0.0; 2 * m],
@@ -479,7 +513,7 @@ impl Factor {
             live,
             numeric,
             reused,
-        })
+        }))
     }
 
     /// The ordering and symbolic analysis this factor was computed on.
@@ -760,7 +794,9 @@ mod tests {
             .zip(&st2.active)
             .map(|(&v, &on)| if on { v - 0.5 } else { 0.0 })
             .collect();
-        let mut kept = Factor::new_reusing(&st2, None, Some(f1.analysis()), None).unwrap();
+        let mut kept = Factor::new_reusing(&st2, None, Some(f1.analysis()), None, None)
+            .unwrap()
+            .unwrap();
         assert!(kept.reused() && halved(&kept));
         let mut fresh = Factor::new(&st2, None).unwrap();
         let mut r = vec![0.0; n];

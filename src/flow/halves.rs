@@ -259,6 +259,13 @@ impl Analysis {
     pub fn separator(&self) -> usize {
         self.k
     }
+
+    /// Multiply-adds on the factor's critical path: the heavier side's (the two run at
+    /// once, one per thread) and the separator's dense factor, `k³/3`.
+    pub fn critical_flops(&self) -> f64 {
+        let sides = side_flops(&self.sides[0]).max(side_flops(&self.sides[1]));
+        sides + (self.k as f64).powi(3) / 3.0
+    }
 }
 
 /// The lower triangle of `A[unknowns, unknowns]` in the order of `unknowns` (unknown `q` on
@@ -271,25 +278,36 @@ fn side_matrix(st: &Stencil, cells: &[usize], unknowns: &[usize]) -> Lower {
     SparseColMat::new(pattern, vals)
 }
 
-/// `LEAKPATH_FLOW_PROFILE`'s lines for a side: its supernodes by width (powers of two), the
-/// factor's flops (its own columns') and the time of its numeric factor.
-fn profile_side(sa: &SideAnalysis, t_factor: f64) {
+/// Multiply-adds of a side's numeric factor: `Σ (rows below the diagonal + 1)²` over its own
+/// columns (the separator's columns are factored densely after both sides).
+fn side_flops(sa: &SideAnalysis) -> f64 {
     let sn = sa.symbolic.layout();
     let (b, e, rp) = (
         sn.supernode_begin(),
         sn.supernode_end(),
         sn.col_ptr_for_row_idx(),
     );
-    let mut flops = 0f64;
+    (0..sn.n_supernodes())
+        .filter(|&s| b[s] < sa.own)
+        .map(|s| {
+            let nc = e[s] - b[s];
+            let nr = nc + rp[s + 1] - rp[s];
+            (0..nc).map(|c| ((nr - c) * (nr - c)) as f64).sum::<f64>()
+        })
+        .sum()
+}
+
+/// `LEAKPATH_FLOW_PROFILE`'s lines for a side: its supernodes by width (powers of two), the
+/// factor's flops (its own columns') and the time of its numeric factor.
+fn profile_side(sa: &SideAnalysis, t_factor: f64) {
+    let sn = sa.symbolic.layout();
+    let (b, e) = (sn.supernode_begin(), sn.supernode_end());
     let mut widths = [0usize; 6];
     for s in 0..sn.n_supernodes() {
         let nc = e[s] - b[s];
-        let nr = nc + rp[s + 1] - rp[s];
         widths[(usize::BITS - nc.leading_zeros()).min(5) as usize] += 1;
-        if b[s] < sa.own {
-            flops += (0..nc).map(|c| ((nr - c) * (nr - c)) as f64).sum::<f64>();
-        }
     }
+    let flops = side_flops(sa);
     eprintln!(
         "halves: side of {} unknowns, {} entries, {} supernodes (by width 1, 2-3, 4-7, 8-15, \
          16+: {:?}), {flops:.3e} flops; numeric {t_factor:.4} s",

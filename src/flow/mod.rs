@@ -32,10 +32,11 @@
 //!
 //! The conductances are scaled by the largest open gap cubed so the system is dimensionless.
 //! By default ([`Solver::Auto`]) a sparse Cholesky factor ([`direct`]) whenever its exact
-//! size, known after the symbolic analysis, fits in memory: exact to round-off however
-//! widely the conductances spread, one factor for both right-hand sides. Otherwise conjugate
-//! gradients on the spanning cells, preconditioned by classical (Ruge–Stüben) algebraic multigrid
-//! ([`multigrid`]). The flow along axis 0 and its checks are in `axis0.rs`, the three solution
+//! size, known after the symbolic analysis, fits in memory and its predicted time is not
+//! above the multigrid's ([`cost`]): exact to round-off however widely the conductances
+//! spread, one factor for both right-hand sides. Otherwise conjugate gradients on the
+//! spanning cells, preconditioned by classical (Ruge–Stüben) algebraic multigrid
+//! ([`multigrid`]); from [`MULTIGRID_FROM`] unknowns the multigrid first. The flow along axis 0 and its checks are in `axis0.rs`, the three solution
 //! paths and their answer checks in `paths.rs`.
 //! All loops run on rayon, reductions in fixed chunks: the same bits for any thread count.
 
@@ -43,6 +44,7 @@ pub mod assemble;
 mod axis0;
 pub mod cg;
 mod compensated;
+pub mod cost;
 pub mod dead_ends;
 pub mod direct;
 mod extremes;
@@ -81,8 +83,9 @@ pub const DEFAULT_TOL: f64 = 1e-12;
 /// From this many unknowns `Auto` takes the multigrid without trying the factor: on the
 /// near-threshold gaps of benchmarks/results/flow_amg.md it is there the faster and needs a
 /// third of the memory (10.0 million unknowns at 4097²: 20.5 s and 2.6 GiB against the
-/// factor's 54.2 s and 9.0 GiB), while on 2049² gaps (2.3–2.7 million) either may be the
-/// faster (6.3 against 5.2 s, 5.4 against 9.5 s) and the factor is kept.
+/// factor's 54.2 s and 9.0 GiB), and its symbolic analysis alone takes seconds. Below,
+/// either may be the faster, and `Auto` weighs them once the analysis is known
+/// ([`cost`]).
 pub const MULTIGRID_FROM: usize = 1 << 22;
 
 /// Default iteration cap. Gaps of contacts near the percolation threshold, whose
@@ -113,11 +116,12 @@ pub struct Problem<'a> {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Solver {
     /// Cholesky when its factor fits in memory (the symbolic analysis skipped when even a
-    /// lower bound of it does not), multigrid otherwise, and when the factor's answer fails
-    /// its checks on more unknowns than the cancellation-free elimination takes. From
-    /// [`MULTIGRID_FROM`] unknowns the multigrid first, and the factor when the multigrid
-    /// refuses the gap (a region joined through faces below its single-precision range)
-    /// and the factor fits.
+    /// lower bound of it does not) and is not predicted slower than the multigrid
+    /// ([`cost`]), multigrid otherwise, and when the factor's answer fails its checks on
+    /// more unknowns than the cancellation-free elimination takes. From [`MULTIGRID_FROM`]
+    /// unknowns the multigrid first. Where the multigrid ran first (by size or by the
+    /// prediction) and refuses the gap (a region joined through faces below its
+    /// single-precision range), the factor when it fits.
     Auto,
     /// Sparse Cholesky ([`direct`]), refined with double-double residuals.
     Cholesky,
@@ -158,6 +162,11 @@ pub struct Options<'a> {
     /// From this many unknowns [`Solver::Auto`] runs the multigrid first, and the factor
     /// only when the multigrid refuses and the factor fits (default [`MULTIGRID_FROM`]).
     pub multigrid_from: usize,
+    /// Below [`Options::multigrid_from`], [`Solver::Auto`] takes the multigrid when the
+    /// factor's predicted time exceeds this many seconds per unknown ([`cost`]; default
+    /// [`cost::MULTIGRID_SECONDS_PER_UNKNOWN`]; 0 takes the multigrid whenever the factor
+    /// fits too, the factor then answering where the multigrid refuses).
+    pub multigrid_seconds_per_unknown: f64,
 }
 
 impl Default for Options<'_> {
@@ -170,6 +179,7 @@ impl Default for Options<'_> {
             should_stop: None,
             analysis: None,
             multigrid_from: MULTIGRID_FROM,
+            multigrid_seconds_per_unknown: cost::MULTIGRID_SECONDS_PER_UNKNOWN,
         }
     }
 }

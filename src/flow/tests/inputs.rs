@@ -97,6 +97,27 @@ fn auto_skips_the_factor_from_multigrid_from_unknowns() {
     assert!(axis0::auto_skips_factor(1000, MULTIGRID_FROM, Some(1024)));
 }
 
+/// Below its size threshold `Auto` weighs the factor against the multigrid once the
+/// analysis is known: with the default rates the factor on a small grid, with a free
+/// multigrid (0 s per unknown) the multigrid, whose rate matches the factor's.
+#[test]
+fn auto_takes_the_multigrid_when_it_is_predicted_faster() {
+    let n = 96;
+    let gap = random_gap(12, n * n, 0.3);
+    let pr = problem(&gap, n, n, 0, true);
+    let exact = solve(&pr, &forced(Solver::Cholesky)).unwrap();
+    assert_eq!(solve(&pr, &Options::default()).unwrap().solver, "cholesky");
+    let free = Options {
+        multigrid_seconds_per_unknown: 0.0,
+        ..Options::default()
+    };
+    let sol = solve(&pr, &free).unwrap();
+    assert_eq!(sol.solver, "multigrid");
+    assert!(sol.iterations > 0);
+    assert!(rel(sol.flow_rate, exact.flow_rate) < 1e-10);
+    assert!(rel(sol.inlet_flow_rate, exact.flow_rate) < 1e-10);
+}
+
 /// A gap of random widths in [0.5, 1) on an `n × n` wrapped grid with a walled 21 × 21
 /// pocket joined to the rest through two cells of gap `neck`, in its left and right walls
 /// (so that it is not a dead end); and the contact mask, with the necks closed too when
@@ -136,6 +157,14 @@ fn auto_answers_with_the_factor_where_the_multigrid_refuses() {
     };
     let sol = solve(&pr, &first).unwrap();
     assert_eq!(sol.solver, "cholesky");
+    // The same below the threshold when the multigrid is taken as the predicted faster.
+    let weighed = Options {
+        multigrid_seconds_per_unknown: 0.0,
+        ..Options::default()
+    };
+    let by_cost = solve(&pr, &weighed).unwrap();
+    assert_eq!(by_cost.solver, "cholesky");
+    assert_eq!(by_cost.flow_rate.to_bits(), sol.flow_rate.to_bits());
 
     let (gap_s, contact_s) = pocket_gap(n, 1e-20, true);
     let mut sealed = problem(&gap_s, n, n, 0, true);
