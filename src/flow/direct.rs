@@ -314,28 +314,14 @@ fn profile(
 /// Multiply-adds of a whole factor, `Σ (entries of the column, its diagonal's included)²`
 /// over its columns.
 fn whole_flops(symbolic: &SymbolicCholesky<usize>) -> f64 {
-    let sn = match symbolic.raw() {
-        SymbolicCholeskyRaw::Supernodal(sn) => sn,
-        SymbolicCholeskyRaw::Simplicial(s) => {
-            return s
-                .col_ptr()
-                .windows(2)
-                .map(|w| ((w[1] - w[0]) as f64).powi(2))
-                .sum();
-        }
-    };
-    let (b, e, rp) = (
-        sn.supernode_begin(),
-        sn.supernode_end(),
-        sn.col_ptr_for_row_idx(),
-    );
-    (0..sn.n_supernodes())
-        .map(|s| {
-            let nc = e[s] - b[s];
-            let nr = nc + rp[s + 1] - rp[s];
-            (0..nc).map(|c| ((nr - c) * (nr - c)) as f64).sum::<f64>()
-        })
-        .sum()
+    match symbolic.raw() {
+        SymbolicCholeskyRaw::Supernodal(sn) => Layout::of_faer(sn).flops_before(usize::MAX),
+        SymbolicCholeskyRaw::Simplicial(s) => s
+            .col_ptr()
+            .windows(2)
+            .map(|w| ((w[1] - w[0]) as f64).powi(2))
+            .sum(),
+    }
 }
 
 /// Bytes of the values of a factor with `entries` entries, its numeric scratch `scratch`

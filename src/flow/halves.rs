@@ -281,20 +281,7 @@ fn side_matrix(st: &Stencil, cells: &[usize], unknowns: &[usize]) -> Lower {
 /// Multiply-adds of a side's numeric factor: `Σ (rows below the diagonal + 1)²` over its own
 /// columns (the separator's columns are factored densely after both sides).
 fn side_flops(sa: &SideAnalysis) -> f64 {
-    let sn = sa.symbolic.layout();
-    let (b, e, rp) = (
-        sn.supernode_begin(),
-        sn.supernode_end(),
-        sn.col_ptr_for_row_idx(),
-    );
-    (0..sn.n_supernodes())
-        .filter(|&s| b[s] < sa.own)
-        .map(|s| {
-            let nc = e[s] - b[s];
-            let nr = nc + rp[s + 1] - rp[s];
-            (0..nc).map(|c| ((nr - c) * (nr - c)) as f64).sum::<f64>()
-        })
-        .sum()
+    sa.symbolic.layout().flops_before(sa.own)
 }
 
 /// `LEAKPATH_FLOW_PROFILE`'s lines for a side: its supernodes by width (powers of two), the

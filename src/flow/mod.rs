@@ -36,8 +36,9 @@
 //! above the multigrid's ([`cost`]): exact to round-off however widely the conductances
 //! spread, one factor for both right-hand sides. Otherwise conjugate gradients on the
 //! spanning cells, preconditioned by classical (Ruge–Stüben) algebraic multigrid
-//! ([`multigrid`]); from [`MULTIGRID_FROM`] unknowns the multigrid first. The flow along axis 0 and its checks are in `axis0.rs`, the three solution
-//! paths and their answer checks in `paths.rs`.
+//! ([`multigrid`]); from [`MULTIGRID_FROM`] unknowns the multigrid first. The flow along
+//! axis 0 and its checks are in `axis0.rs`, the three solution paths and their answer
+//! checks in `paths.rs`.
 //! All loops run on rayon, reductions in fixed chunks: the same bits for any thread count.
 
 pub mod assemble;

@@ -87,6 +87,19 @@ impl<'a> Layout<'a> {
         self.rptr
     }
 
+    /// Multiply-adds of the numeric factor's supernodes that start before column `end`:
+    /// `Σ (entries of the column, its diagonal's included)²` over their columns.
+    pub(super) fn flops_before(&self, end: usize) -> f64 {
+        (0..self.n_supernodes())
+            .filter(|&s| self.begin[s] < end)
+            .map(|s| {
+                let nc = self.end[s] - self.begin[s];
+                let nr = nc + self.rptr[s + 1] - self.rptr[s];
+                (0..nc).map(|c| ((nr - c) * (nr - c)) as f64).sum::<f64>()
+            })
+            .sum()
+    }
+
     /// Where each supernode's block starts in the values (one more entry: the end).
     #[inline]
     pub(super) fn col_ptr_for_val(&self) -> &'a [usize] {
